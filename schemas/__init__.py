@@ -1,0 +1,1 @@
+"""Versioned Arrow schemas for datagen's Parquet shards."""

@@ -1,0 +1,1 @@
+"""Ray orchestration for datagen jobs (sharding, resumable runs). Library code lives in ``datagen``."""
