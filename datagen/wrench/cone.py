@@ -86,32 +86,38 @@ def cone_support(
     Returns:
         ``(..., 3)`` local force (PCF) or ``(..., 4)`` force and torsional moment (SFC).
     """
-    sfc = b is not None
+    if b is None:
+        return _pcf_support(a, t, mu, delta_rad)
     tiny = tiny_for(a.dtype)
     rho = _rho(t, b, mu, mu_t)
     inv_rho = torch.where(rho > tiny, 1.0 / rho.clamp_min(tiny), torch.zeros_like(rho))
     v_t = (mu * mu * inv_rho)[..., None] * t  # (..., 2) rim point, tangential part
-    if sfc:
-        # The support point lies in the plane spanned by c and v; theta is measured there, so
-        # the 2-D picture of eq. 5/6 holds exactly (and reduces to PCF for mu_t = 0).
-        v_b = (mu_t * mu_t) * inv_rho * b
-        v_len = ((v_t * v_t).sum(-1) + v_b * v_b).clamp_min(tiny * tiny).sqrt()
-        lateral = torch.where(v_len > tiny, rho / v_len, torch.zeros_like(rho))
-        alpha = torch.atan(v_len) + math.pi / 2
-    else:
-        lateral = safe_norm(t, dim=-1)
-        alpha = torch.atan(mu) + math.pi / 2
-        alpha = alpha.expand_as(a) if alpha.dim() else torch.full_like(a, float(alpha))
+    # The support point lies in the plane spanned by c and v; theta is measured there, so the
+    # 2-D picture of eq. 5/6 holds exactly (and reduces to PCF for mu_t = 0).
+    v_b = (mu_t * mu_t) * inv_rho * b
+    v_len = ((v_t * v_t).sum(-1) + v_b * v_b).clamp_min(tiny * tiny).sqrt()
+    lateral = torch.where(v_len > tiny, rho / v_len, torch.zeros_like(rho))
+    alpha = torch.atan(v_len) + math.pi / 2
     theta = torch.atan2(lateral.clamp_min(tiny), a)
+    r, s = _weights(theta, alpha, delta_rad, tiny)
+    return torch.cat([s[..., None], (s * r)[..., None] * v_t, (s * r * v_b)[..., None]], dim=-1)
 
+
+def _weights(theta: torch.Tensor, alpha, delta_rad: float, tiny: float):
+    """Interpolation weights ``r`` (towards the rim) and ``s`` (away from the apex) of eq. 6."""
     if delta_rad == 0.0:
-        r = (theta > tiny).to(a.dtype)
-        s = (theta < alpha).to(a.dtype)
-    else:
-        r = (theta / delta_rad).clamp(0.0, 1.0)
-        s = ((alpha - theta) / delta_rad).clamp(0.0, 1.0)
+        return (theta > tiny).to(theta.dtype), (theta < alpha).to(theta.dtype)
+    inv = 1.0 / delta_rad
+    return (theta * inv).clamp(0.0, 1.0), ((alpha - theta) * inv).clamp(0.0, 1.0)
 
-    parts = [s, (s * r)[..., None] * v_t]
-    if sfc:
-        parts.append((s * r * v_b)[..., None])
-    return torch.cat([parts[0][..., None]] + parts[1:], dim=-1)
+
+def _pcf_support(a: torch.Tensor, t: torch.Tensor, mu, delta_rad: float) -> torch.Tensor:
+    """PCF fast path: ``f = (s, s r mu t / |t|)`` with ``|t|`` floored (``t = 0`` gives ``f = (s, 0)``)."""
+    tiny = tiny_for(a.dtype)
+    t1, t2 = t[..., 0], t[..., 1]
+    tn = (t1 * t1 + t2 * t2).clamp_min(tiny * tiny).sqrt()
+    theta = torch.atan2(tn, a)
+    alpha = torch.atan(mu) + math.pi / 2 if torch.is_tensor(mu) else math.atan(mu) + math.pi / 2
+    r, s = _weights(theta, alpha, delta_rad, tiny)
+    k = s * r * mu / tn
+    return torch.stack([s, k * t1, k * t2], dim=-1)
