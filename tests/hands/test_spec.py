@@ -1,0 +1,204 @@
+"""Specs, user hands (URDF/MJCF), the generator CLI, and the errors users see."""
+
+import os
+import subprocess
+import sys
+import ctypes.util
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+import trimesh
+import yaml
+
+from datagen.hands import BUILTIN_HANDS, HandSpec, HandSpecError, builtin_spec_path, load_hand, load_spec
+from datagen.hands import make_spec
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+URDF = """<?xml version="1.0"?>
+<robot name="toy">
+  <link name="palm">
+    <inertial><mass value="0.2"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><box size="0.08 0.02 0.08"/></geometry></collision>
+  </link>
+{fingers}
+</robot>
+"""
+FINGER = """
+  <link name="{n}_prox">
+    <inertial><mass value="0.02"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.02"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision>
+  </link>
+  <link name="{n}_tip">
+    <inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><mesh filename="{mesh}"/></geometry></collision>
+  </link>
+  <joint name="{n}_j0" type="revolute">
+    <parent link="palm"/><child link="{n}_prox"/><origin xyz="{x} 0 0.04"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="{n}_j1" type="revolute">
+    <parent link="{n}_prox"/><child link="{n}_tip"/><origin xyz="0 0 0.04"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
+  </joint>
+"""
+
+
+def write_toy_urdf(tmp: Path, mesh_name: str = "meshes/tip.stl", make_mesh: bool = True) -> Path:
+    """A two-finger toy hand: box palm, cylinder proximal links, mesh fingertips (an STL we write)."""
+    if make_mesh:
+        (tmp / "meshes").mkdir(exist_ok=True)
+        tip = trimesh.creation.capsule(height=0.02, radius=0.008)
+        tip.apply_translation([0, 0, 0.018])
+        tip.export(tmp / "meshes" / "tip.stl")
+    fingers = "".join(FINGER.format(n=n, x=x, mesh=mesh_name) for n, x in (("a", 0.025), ("b", -0.025)))
+    path = tmp / "toy.urdf"
+    path.write_text(URDF.format(fingers=fingers))
+    return path
+
+
+def test_urdf_hand_end_to_end(tmp_path):
+    urdf = write_toy_urdf(tmp_path)
+    out = tmp_path / "toy.yaml"
+    code = make_spec.main([str(urdf), "--name", "toy", "--root-body", "palm", "--finger", "a_tip=index",
+                           "--finger", "b_tip=thumb", "--out", str(out)])
+    assert code == 0
+    spec = load_spec(out)
+    assert spec.mjcf.path == "toy.urdf" and spec.mjcf.package == ""  # relative to the spec, not copied
+    hand = load_hand(out, dtype=torch.float64)
+    assert hand.joint_names == ["a_j0", "a_j1", "b_j0", "b_j1"]
+    assert hand.actuator_names and len(hand.actuator_names) == 4  # position actuators were added
+    assert set(hand.spec.spheres) == {"palm", "a_prox", "a_tip", "b_prox", "b_tip"}
+    model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+    data = mujoco.MjData(model)
+    q = torch.tensor([0.3, 0.7, 1.1, 0.2], dtype=torch.float64)
+    data.qpos[:] = hand.joints_to_qpos(q)
+    mujoco.mj_forward(model, data)
+    T = hand.link_transforms(torch.tensor([0, 0, 0, 1, 0, 0, 0.0], dtype=torch.float64), q)
+    for i, link in enumerate(hand.link_names):
+        assert np.allclose(T[i, :3, 3].numpy(), data.xpos[model.body(link).id], atol=1e-7)
+    assert np.allclose(hand.joints_to_ctrl(q).numpy(), data.actuator_length, atol=1e-9)
+    tips = hand.fingertip_points(torch.tensor([0, 0, 0, 1, 0, 0, 0.0], dtype=torch.float64), hand.open_pose)
+    assert tips.shape == (2, 3) and hand.fingertip_names == ["index", "thumb"]
+
+
+def test_missing_mesh_in_urdf_names_the_file(tmp_path):
+    urdf = write_toy_urdf(tmp_path, mesh_name="meshes/nowhere.stl", make_mesh=False)
+    with pytest.raises(HandSpecError) as err:
+        make_spec.propose_spec(urdf, name="toy", root_body="palm", asset=make_spec.AssetRef(path=str(urdf)))
+    assert str(urdf) in str(err.value) and "nowhere.stl" in str(err.value)
+
+
+def test_missing_mesh_in_mjcf_names_the_file(tmp_path):
+    mjcf = tmp_path / "hand.xml"
+    mjcf.write_text("""<mujoco><asset><mesh name="m" file="gone.stl"/></asset><worldbody>
+      <body name="palm"><geom type="mesh" mesh="m"/></body></worldbody></mujoco>""")
+    spec_path = tmp_path / "hand.yaml"
+    data = yaml.safe_load(builtin_spec_path("shadow").read_text())
+    data.update(name="broken", mjcf={"path": "hand.xml"}, root_body="palm")
+    spec_path.write_text(yaml.safe_dump(data))
+    with pytest.raises(HandSpecError) as err:
+        load_hand(spec_path)
+    assert str(mjcf) in str(err.value) and "gone.stl" in str(err.value)
+
+
+def _shadow_spec_dict():
+    return yaml.safe_load(builtin_spec_path("shadow").read_text())
+
+
+@pytest.mark.parametrize("mutate,needle", [
+    (lambda d: d.pop("palm"), "missing required key 'palm'"),
+    (lambda d: d.update(colour="red"), "unknown keys"),
+    (lambda d: d["spheres"].update({"robot0:palm": [[0, 0, 0]]}), "4 finite numbers"),
+    (lambda d: d["spheres"].update({"robot0:palm": [[0, 0, 0, -0.01]]}), "radius must be > 0"),
+    (lambda d: d["fingertips"]["ff"].update(normal=[0, 0, 0]), "non-zero direction"),
+    (lambda d: d["palm"].update(thumb=d["palm"]["approach"]), "orthogonal"),
+    (lambda d: d.update(version=99), "version"),
+    (lambda d: d["sphere_fit"].update(overshoot=0.5), "overshoot"),
+])
+def test_malformed_spec_names_the_file(tmp_path, mutate, needle):
+    data = _shadow_spec_dict()
+    mutate(data)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(HandSpecError) as err:
+        load_spec(path)
+    assert str(path) in str(err.value) and needle in str(err.value)
+
+
+def test_invalid_yaml_and_unknown_names(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("name: [unclosed\n")
+    with pytest.raises(HandSpecError, match="not valid YAML") as err:
+        load_spec(path)
+    assert str(path) in str(err.value)
+    with pytest.raises(HandSpecError, match="built-in hands"):
+        load_hand("no_such_hand")
+    with pytest.raises(HandSpecError, match="not found"):
+        load_hand(tmp_path / "absent.yaml")
+    data = _shadow_spec_dict()
+    data["fingertips"]["ff"]["link"] = "robot0:nolink"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(HandSpecError, match="unknown link 'robot0:nolink'") as err:
+        load_hand(path)
+    assert str(path) in str(err.value)
+
+
+def test_missing_package_says_how_to_install(tmp_path):
+    data = _shadow_spec_dict()
+    data["mjcf"] = {"package": "datagen_no_such_package", "path": "hand.xml"}
+    path = tmp_path / "pkg.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(HandSpecError, match="not installed") as err:
+        load_hand(path)
+    assert str(path) in str(err.value) and "pip install datagen_no_such_package" in str(err.value)
+
+
+@pytest.mark.parametrize("name", list(BUILTIN_HANDS))
+def test_builtin_specs_round_trip_and_reference_registry_assets(name):
+    spec = load_spec(builtin_spec_path(name))
+    assert spec.mjcf.package == BUILTIN_HANDS[name][1]  # referenced inside the registry package
+    again = HandSpec.from_dict(spec.to_dict())
+    assert again.to_dict() == spec.to_dict()
+    assert again.spheres == spec.spheres and again.self_collision_pairs == spec.self_collision_pairs
+    assert builtin_spec_path(name).stat().st_size < 1_000_000
+
+
+def test_no_vendored_assets_in_the_package():
+    hands = REPO / "datagen" / "hands"
+    vendored = [p for p in hands.rglob("*") if p.suffix.lower() in {".stl", ".obj", ".xml", ".urdf", ".msh", ".png"}]
+    assert vendored == []
+
+
+@pytest.mark.skipif(ctypes.util.find_library("OSMesa") is None, reason="libosmesa6 not installed")
+def test_make_spec_cli_renders_a_picture(tmp_path):
+    urdf = write_toy_urdf(tmp_path)
+    env = dict(os.environ, MUJOCO_GL="osmesa")
+    png = tmp_path / "toy.png"
+    result = subprocess.run(
+        [sys.executable, "-m", "datagen.hands.make_spec", str(urdf), "--name", "toy", "--root-body", "palm",
+         "--out", str(tmp_path / "toy.yaml"), "--render", str(png)],
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+
+
+def test_unsupported_kinematics_is_caught_at_load(tmp_path):
+    """pytorch-kinematics ignores a hinge's pos; load_hand compares with MuJoCo and refuses."""
+    (tmp_path / "h.xml").write_text("""<mujoco><worldbody><body name="palm"><geom type="box" size=".02 .02 .02"/>
+      <body name="f" pos="0 0 0.03"><joint name="j" axis="1 0 0" pos="0 0.01 0" range="0 1.5"/>
+      <geom type="capsule" size=".008 .01" pos="0 0 .015"/></body></body></worldbody></mujoco>""")
+    spec = {"name": "offset", "mjcf": {"path": "h.xml"}, "root_body": "palm",
+            "spheres": {"palm": [[0, 0, 0, 0.02]], "f": [[0, 0, 0.015, 0.01]]},
+            "fingertips": {"a": {"link": "f", "point": [0, -0.008, 0.015], "normal": [0, -1, 0]}},
+            "palm": {"link": "palm", "origin": [0, -0.02, 0], "approach": [0, -1, 0], "thumb": [1, 0, 0]}}
+    path = tmp_path / "h.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with pytest.raises(HandSpecError, match="disagrees with MuJoCo") as err:
+        load_hand(path)
+    assert str(path) in str(err.value)
