@@ -1,0 +1,65 @@
+"""CLI subcommands of the objects package: ``manifest build`` and ``prepare``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["register_manifest", "register_prepare"]
+
+
+def register_manifest(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("manifest", help="object manifests")
+    msub = p.add_subparsers(dest="manifest_command", required=True)
+    b = msub.add_parser("build", help="enumerate a source into a manifest (JSONL)")
+    b.add_argument("--source", default="procedural",
+                   help="procedural[:SEED] | dexgraspnet:PATH | dir:PATH | pybullet")
+    b.add_argument("--count", type=int, default=None, help="number of objects (all files if omitted)")
+    b.add_argument("--out", required=True, help="output manifest, e.g. manifests/NAME.jsonl")
+    b.add_argument("--scales", type=float, nargs="+", default=None, help="object scales (metres)")
+    b.add_argument("--test-fraction", type=float, default=0.1)
+    b.set_defaults(func=_manifest_build)
+    c = msub.add_parser("check", help="validate a manifest")
+    c.add_argument("manifest")
+    c.set_defaults(func=_manifest_check)
+
+
+def _manifest_build(args) -> int:
+    from .manifest import DEFAULT_SCALES, build_manifest, write_manifest
+
+    entries = build_manifest(args.source, args.count, args.scales or DEFAULT_SCALES,
+                             args.test_fraction, progress=sys.stderr.isatty())
+    write_manifest(entries, args.out)
+    test = sum(e.split == "test" for e in entries)
+    print(f"wrote {args.out}: {len(entries)} objects ({test} test)")
+    return 0
+
+
+def _manifest_check(args) -> int:
+    from .manifest import load_manifest
+
+    print(f"{args.manifest}: {len(load_manifest(args.manifest))} objects, valid")
+    return 0
+
+
+def register_prepare(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("prepare", help="process manifest objects into the cache")
+    p.add_argument("--manifest", required=True)
+    p.add_argument("--config", default=None, help="YAML processing config (ProcessConfig fields)")
+    p.add_argument("--cache", default=None, help="cache root (default $DATAGEN_CACHE or ~/.cache/datagen)")
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--limit", type=int, default=None, help="process only the first N objects")
+    p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
+    p.set_defaults(func=_prepare)
+
+
+def _prepare(args) -> int:
+    from .config import ProcessConfig
+    from .prepare import prepare, summarize, write_results
+
+    cfg = ProcessConfig.from_yaml(args.config) if args.config else ProcessConfig()
+    results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit)
+    if args.results:
+        write_results(results, args.results)
+    print(summarize(results))
+    return 0

@@ -1,0 +1,62 @@
+"""Domain errors and reason codes for object sources, manifests and processing.
+
+A failed object is a *status with a reason code* (:class:`Reason`), never a crashed batch:
+the pipeline catches :class:`ObjectError` and records ``reason`` and ``message`` in the
+object's cache entry. Manifest problems raise :class:`ManifestError` on load, because a bad
+manifest is a user error that must be fixed before any work starts.
+"""
+
+from __future__ import annotations
+
+import enum
+
+__all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError"]
+
+
+class Reason(str, enum.Enum):
+    """Stable reason codes recorded for failed objects and rejected manifests."""
+
+    MISSING_FILE = "missing_file"            # the mesh file does not exist
+    UNREADABLE_MESH = "unreadable_mesh"      # the file is not a mesh the loader understands
+    EMPTY_MESH = "empty_mesh"                # no vertices or no faces
+    NON_FINITE = "non_finite_vertices"       # NaN or inf coordinates
+    HUGE_COORDINATES = "huge_coordinates"    # |coordinate| above ProcessConfig.max_abs_coordinate
+    TOO_LARGE = "too_many_faces"             # face count above ProcessConfig.max_faces
+    DEGENERATE = "degenerate_mesh"           # zero extent, zero area or zero volume
+    COACD_FAILED = "coacd_failed"            # CoACD raised
+    COACD_NO_PARTS = "coacd_no_parts"        # CoACD returned no part above the volume floor
+    SURFACE_FAILED = "surface_failed"        # no watertight simplified surface could be built
+    MJCF_FAILED = "mjcf_failed"              # MuJoCo rejected the model of the pieces
+    SHA_MISMATCH = "sha256_mismatch"         # the file changed since the manifest was built
+    # manifest-level reasons
+    MALFORMED_LINE = "malformed_line"        # not a JSON object
+    SCHEMA = "schema"                        # missing/extra/mistyped field
+    DUPLICATE_ID = "duplicate_id"            # two lines with the same id
+    PATH_ESCAPES_ROOT = "path_escapes_root"  # a source path resolves outside its root
+    UNKNOWN_SOURCE = "unknown_source"        # the source URI names no known source
+
+
+class ObjectError(Exception):
+    """Base error: carries a :class:`Reason` code and the thing it concerns.
+
+    The message names the thing (object id, file or manifest line) and the reason, and where
+    possible the remedy.
+    """
+
+    def __init__(self, reason: Reason, thing: str, detail: str):
+        self.reason = Reason(reason)
+        self.thing = thing
+        self.detail = detail
+        super().__init__(f"{thing}: {self.reason.value}: {detail}")
+
+
+class MeshProcessingError(ObjectError):
+    """A mesh could not be loaded, validated, decomposed or modelled."""
+
+
+class ManifestError(ObjectError):
+    """A manifest file or line is invalid."""
+
+
+class SourceError(ObjectError):
+    """A source URI is unknown or cannot enumerate its objects."""

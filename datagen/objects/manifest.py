@@ -1,0 +1,153 @@
+"""Object manifests: one JSON object per line, validated on load.
+
+Line schema (all fields required, no others)::
+
+    {"id": str, "source": str (canonical source URI), "path": str (relative to the source root;
+     procedural: the index), "family": str ("" for files), "sha256": str (64 hex, raw mesh bytes),
+     "scales": [float, ...] (metres, > 0), "split": "train" | "test"}
+
+The split is a function of the id alone (``split_of``), so it is stable when objects are added.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Iterable
+
+from .errors import ManifestError, MeshProcessingError, Reason, SourceError
+from .sources import ObjectRef, iter_source, resolve
+
+__all__ = ["DEFAULT_SCALES", "ManifestEntry", "split_of", "build_manifest", "write_manifest",
+           "load_manifest"]
+
+DEFAULT_SCALES = (0.06, 0.08, 0.10, 0.12)
+_FIELDS = {"id": str, "source": str, "path": str, "family": str, "sha256": str, "scales": list,
+           "split": str}
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,199}$")
+_SHA = re.compile(r"^[0-9a-f]{64}$")
+
+
+@dataclass(frozen=True)
+class ManifestEntry:
+    """One object of a manifest (see the module docstring for the fields)."""
+
+    id: str
+    source: str
+    path: str
+    family: str
+    sha256: str
+    scales: tuple
+    split: str
+
+    def ref(self) -> ObjectRef:
+        """The ObjectRef to read this object (the path is checked against the source root)."""
+        return resolve(self.source, self.path, self.id, self.family)
+
+    def to_json(self) -> str:
+        d = asdict(self)
+        d["scales"] = list(self.scales)
+        return json.dumps(d, sort_keys=True)
+
+
+def split_of(object_id: str, test_fraction: float = 0.1) -> str:
+    """'test' for a stable pseudo-random ``test_fraction`` of ids (sha256 of the id), else 'train'."""
+    h = int(hashlib.sha256(object_id.encode()).hexdigest()[:8], 16) / 0x100000000
+    return "test" if h < test_fraction else "train"
+
+
+def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEFAULT_SCALES,
+                   test_fraction: float = 0.1, progress: bool = False) -> list[ManifestEntry]:
+    """Enumerate a source and hash each raw mesh. Objects whose file cannot be read are skipped
+    with a warning on stderr (processing records every other failure)."""
+    scales = tuple(float(s) for s in scales)
+    if not scales or min(scales) <= 0:
+        raise ValueError(f"manifest scales must be positive metres, got {scales}")
+    if not 0 <= test_fraction <= 1:
+        raise ValueError(f"test_fraction must be in [0, 1], got {test_fraction}")
+    refs = list(iter_source(source, count))
+    if progress:
+        from tqdm import tqdm
+        refs = tqdm(refs, desc="hashing", unit="obj")
+    out = []
+    for ref in refs:
+        try:
+            sha = hashlib.sha256(ref.read_bytes()).hexdigest()
+        except MeshProcessingError as exc:
+            print(f"warning: skipped {exc}", flush=True)
+            continue
+        out.append(ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, scales,
+                                 split_of(ref.object_id, test_fraction)))
+    return out
+
+
+def write_manifest(entries: Iterable[ManifestEntry], path: str | Path) -> Path:
+    """Write atomically (temp file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            for e in entries:
+                fh.write(e.to_json() + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    return path
+
+
+def _entry(obj, where: str) -> ManifestEntry:
+    if not isinstance(obj, dict):
+        raise ManifestError(Reason.MALFORMED_LINE, where, "a line must be a JSON object")
+    missing, extra = set(_FIELDS) - set(obj), set(obj) - set(_FIELDS)
+    if missing or extra:
+        raise ManifestError(Reason.SCHEMA, where,
+                            f"missing fields {sorted(missing)}, unknown fields {sorted(extra)}")
+    for k, typ in _FIELDS.items():
+        if not isinstance(obj[k], typ):
+            raise ManifestError(Reason.SCHEMA, where, f"field {k!r} must be {typ.__name__}")
+    if not _ID.match(obj["id"]):
+        raise ManifestError(Reason.SCHEMA, where, f"id {obj['id']!r} is not [A-Za-z0-9._-]{{1,200}}")
+    if not _SHA.match(obj["sha256"]):
+        raise ManifestError(Reason.SCHEMA, where, "sha256 must be 64 lowercase hex digits")
+    sc = obj["scales"]
+    if not sc or not all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0 < s < 10
+                         for s in sc):
+        raise ManifestError(Reason.SCHEMA, where, f"scales must be numbers in (0, 10) metres, got {sc}")
+    if obj["split"] not in ("train", "test"):
+        raise ManifestError(Reason.SCHEMA, where, f"split must be 'train' or 'test', got {obj['split']!r}")
+    e = ManifestEntry(obj["id"], obj["source"], obj["path"], obj["family"], obj["sha256"],
+                      tuple(float(s) for s in sc), obj["split"])
+    try:
+        e.ref()  # source known, path inside its root
+    except SourceError as exc:
+        raise ManifestError(Reason.UNKNOWN_SOURCE, where, exc.detail) from exc
+    except ManifestError as exc:
+        raise ManifestError(exc.reason, where, exc.detail) from exc
+    return e
+
+
+def load_manifest(path: str | Path) -> list[ManifestEntry]:
+    """Read and validate a manifest; the first bad line raises ManifestError naming it."""
+    path = Path(path)
+    entries, seen = [], {}
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        where = f"{path}:{n}"
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ManifestError(Reason.MALFORMED_LINE, where, f"not JSON ({exc.msg})") from exc
+        e = _entry(obj, where)
+        if e.id in seen:
+            raise ManifestError(Reason.DUPLICATE_ID, where, f"id {e.id!r} already on line {seen[e.id]}")
+        seen[e.id] = n
+        entries.append(e)
+    return entries

@@ -1,0 +1,155 @@
+"""Object sources: each enumerates (object id, raw mesh) pairs under a source URI.
+
+Source URIs (the ``--source`` argument and the manifest's ``source`` field):
+
+- ``procedural`` or ``procedural:SEED``: the built-in generator (``procedural.py``); an object's
+  path is its index, e.g. ``"17"``.
+- ``dexgraspnet:ROOT``: DexGraspNet's meshdata layout, ``ROOT/<code>/coacd/decomposed.obj``; the
+  path is ``<code>/coacd/decomposed.obj``; its ``coacd_convex_piece_<i>.obj`` are reused.
+- ``dir:ROOT``: every obj/stl/ply/off/glb file under ROOT (recursive, sorted); the path is the
+  file's path relative to ROOT.
+- ``pybullet``: pybullet_data/random_urdfs/<n>/<n>.obj (needs the optional pybullet package).
+
+Paths are always relative to the source root; ``resolve`` rejects any that escapes it.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from . import procedural
+from .errors import ManifestError, MeshProcessingError, Reason, SourceError
+from .mesh_ops import MESH_EXTENSIONS
+
+__all__ = ["ObjectRef", "iter_source", "resolve", "canonical_source"]
+
+_PIECE = re.compile(r"coacd_convex_piece_(\d+)\.obj$")
+
+
+@dataclass(frozen=True)
+class ObjectRef:
+    """One object of a source: enough to read its raw mesh (and any existing convex pieces)."""
+
+    object_id: str
+    source: str          # canonical source URI, e.g. "dir:/abs/root"
+    path: str            # relative to the source root (procedural: the index)
+    file_type: str       # obj, stl, ply, off or glb
+    family: str = ""     # procedural family, "" for file sources
+
+    @property
+    def file(self) -> Path | None:
+        """Absolute mesh file, or None for generated objects."""
+        root = _root(self.source)
+        return None if root is None else root / self.path
+
+    def read_bytes(self) -> bytes:
+        """The raw mesh bytes; MeshProcessingError(missing_file) if the file is gone."""
+        if self.file is None:
+            seed, index = _procedural_seed(self.source), int(self.path)
+            return procedural.generate(seed, index).obj_bytes
+        try:
+            return self.file.read_bytes()
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:
+            raise MeshProcessingError(Reason.MISSING_FILE, self.object_id,
+                                      f"mesh file {self.file} does not exist") from exc
+
+    def piece_files(self) -> list[Path]:
+        """Existing CoACD pieces next to a DexGraspNet decomposed.obj, in index order."""
+        if not self.source.startswith("dexgraspnet:") or self.file is None:
+            return []
+        found = [(int(m.group(1)), p) for p in self.file.parent.glob("coacd_convex_piece_*.obj")
+                 if (m := _PIECE.search(p.name))]
+        return [p for _, p in sorted(found)]
+
+
+def canonical_source(uri: str) -> str:
+    """Normalize a source URI (absolute roots, explicit procedural seed)."""
+    kind, _, arg = uri.partition(":")
+    if kind == "procedural":
+        return f"procedural:{_procedural_seed(uri)}"
+    if kind in ("dir", "dexgraspnet"):
+        if not arg:
+            raise SourceError(Reason.UNKNOWN_SOURCE, uri, f"{kind}: needs a folder, e.g. {kind}:/data")
+        return f"{kind}:{Path(arg).expanduser().resolve()}"
+    if kind == "pybullet":
+        return f"dir:{_pybullet_root()}"
+    raise SourceError(Reason.UNKNOWN_SOURCE, uri,
+                      "use procedural[:SEED], dexgraspnet:PATH, dir:PATH or pybullet")
+
+
+def _procedural_seed(uri: str) -> int:
+    arg = uri.partition(":")[2]
+    if not arg:
+        return 0
+    if not arg.isdigit():
+        raise SourceError(Reason.UNKNOWN_SOURCE, uri, "procedural seed must be an int >= 0")
+    return int(arg)
+
+
+def _root(source: str) -> Path | None:
+    kind, _, arg = source.partition(":")
+    return None if kind == "procedural" else Path(arg)
+
+
+def _pybullet_root() -> Path:
+    try:
+        import pybullet_data
+    except ImportError as exc:
+        raise SourceError(Reason.UNKNOWN_SOURCE, "pybullet",
+                          "pybullet is not installed (pip install pybullet)") from exc
+    return Path(pybullet_data.getDataPath()) / "random_urdfs"
+
+
+def _id_from_path(rel: str) -> str:
+    """'sub dir/box.obj' -> 'sub_dir__box.obj' (the extension stays: box.obj and box.stl differ)."""
+    parts = [re.sub(r"[^A-Za-z0-9._-]+", "_", p) for p in rel.split("/")]
+    return "__".join(parts).lstrip("._-") or "object"
+
+
+def iter_source(uri: str, count: int | None = None) -> Iterator[ObjectRef]:
+    """Enumerate up to ``count`` objects of a source (all file objects if None)."""
+    source = canonical_source(uri)
+    kind, _, arg = source.partition(":")
+    if kind == "procedural":
+        if count is None:
+            raise SourceError(Reason.UNKNOWN_SOURCE, uri, "the procedural source needs a count")
+        seed = int(arg)
+        for i in range(count):
+            yield ObjectRef(procedural.object_id(seed, i), source, str(i), "obj",
+                            procedural.family_of(seed, i))
+        return
+    root = Path(arg)
+    if not root.is_dir():
+        raise SourceError(Reason.UNKNOWN_SOURCE, uri, f"source folder {root} does not exist")
+    if kind == "dexgraspnet":
+        files = sorted(root.glob("*/coacd/decomposed.obj"))
+        make_id = lambda rel: rel.split("/", 1)[0]  # noqa: E731  (the object code)
+    else:
+        files = sorted(p for p in root.rglob("*")
+                       if p.is_file() and p.suffix.lower().lstrip(".") in MESH_EXTENSIONS
+                       and not p.name.endswith("_coll.obj"))
+        make_id = _id_from_path
+    for n, p in enumerate(files):
+        if count is not None and n >= count:
+            return
+        rel = p.relative_to(root).as_posix()
+        yield ObjectRef(make_id(rel), source, rel, p.suffix.lower().lstrip("."))
+
+
+def resolve(source: str, path: str, object_id: str, family: str = "") -> ObjectRef:
+    """The ObjectRef of a manifest line; ManifestError(path_escapes_root) for a path that
+    leaves the source root (absolute, '..', or a symlink pointing out)."""
+    source = canonical_source(source)
+    root = _root(source)
+    if root is None:
+        if not path.isdigit():
+            raise ManifestError(Reason.SCHEMA, object_id, f"procedural path must be an index, got {path!r}")
+        return ObjectRef(object_id, source, path, "obj", family)
+    target = (root / path).resolve()
+    if Path(path).is_absolute() or not target.is_relative_to(root.resolve()):
+        raise ManifestError(Reason.PATH_ESCAPES_ROOT, object_id,
+                            f"path {path!r} resolves outside the source root {root}")
+    return ObjectRef(object_id, source, path, Path(path).suffix.lower().lstrip("."), family)
