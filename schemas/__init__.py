@@ -1,1 +1,70 @@
-"""Versioned Arrow schemas for datagen's Parquet shards."""
+"""Versioned Arrow schemas for datagen's Parquet files, declared once in JSON.
+
+``grasps.json`` declares every column (type, shape, unit, frame, doc); :func:`arrow_schema`
+builds the ``pyarrow.Schema`` from it (``nq`` = 7 + the hand's joint count), with the schema
+name and version in the metadata; :func:`check_version` refuses files of another version.
+"""
+
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from pathlib import Path
+
+import pyarrow as pa
+
+__all__ = ["SchemaError", "arrow_schema", "check_version", "columns", "declaration"]
+
+_DIR = Path(__file__).parent
+_SCALARS = {"string": pa.string(), "float32": pa.float32(), "int64": pa.int64(), "int32": pa.int32(), "bool": pa.bool_()}
+
+
+class SchemaError(ValueError):
+    """A file or table that does not match the declared schema (names the file and the mismatch)."""
+
+
+@lru_cache
+def declaration(name: str = "grasps") -> dict:
+    path = _DIR / f"{name}.json"
+    if not path.is_file():
+        raise SchemaError(f"no schema declaration {path}")
+    return json.loads(path.read_text())
+
+
+def columns(name: str = "grasps") -> list[dict]:
+    return declaration(name)["columns"]
+
+
+def _arrow_type(col: dict, dims: dict[str, int]) -> pa.DataType:
+    t = col["type"]
+    if t == "list<string>":
+        return pa.list_(pa.string())
+    if t == "list<float32>":
+        return pa.list_(pa.float32())
+    if t == "list<float32[3]>":
+        return pa.list_(pa.list_(pa.float32(), 3))
+    base = _SCALARS[t]
+    if "shape" in col:
+        (n,) = col["shape"]
+        size = dims[n] if isinstance(n, str) else int(n)
+        return pa.list_(base, size)
+    return base
+
+
+def arrow_schema(name: str = "grasps", **dims: int) -> pa.Schema:
+    """Arrow schema of ``name`` with symbolic sizes bound (e.g. ``nq=31``)."""
+    decl = declaration(name)
+    fields = [pa.field(c["name"], _arrow_type(c, dims), metadata={"doc": c["doc"], "unit": c.get("unit", ""),
+                                                                   "frame": c.get("frame", "")})
+              for c in decl["columns"]]
+    meta = {"datagen.schema": decl["name"], "datagen.schema_version": str(decl["version"])}
+    return pa.schema(fields, metadata=meta)
+
+
+def check_version(schema: pa.Schema, name: str = "grasps", where: str = "table") -> None:
+    """Raise :class:`SchemaError` unless ``schema`` carries this schema's name and version."""
+    meta = {k.decode(): v.decode() for k, v in (schema.metadata or {}).items()}
+    want = str(declaration(name)["version"])
+    if meta.get("datagen.schema") != name or meta.get("datagen.schema_version") != want:
+        raise SchemaError(f"{where}: schema {meta.get('datagen.schema')!r} version "
+                          f"{meta.get('datagen.schema_version')!r}, expected {name!r} version {want}")

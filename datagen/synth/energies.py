@@ -1,0 +1,135 @@
+"""Energy terms of the synthesis objective (paper Sec. IV-C), each ``(B,)`` per hand pose.
+
+``E = w_t E_task + w_d E_dist + w_p E_pen + w_s E_self + w_j E_joint``:
+
+* ``E_task``: the cosine task energy of :func:`datagen.wrench.task_energy`, averaged over the K
+  directions, on the task fingertips' nearest object points and inward normals;
+* ``E_dist``: ``sum_i d_i^2`` (m^2), ``d_i`` the signed gap between fingertip ``i``'s contact
+  sphere (the distal-link collision sphere nearest the pad point) and the object: the same
+  sphere the penetration term pushes out, so the two terms agree on where contact is;
+* ``E_pen``: ``sum_s max(0, r_s - d(c_s))^2`` (m^2), hand collision spheres against the object's
+  SDF grid (exact mesh distances are kept for the few fingertip contacts);
+* ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
+* ``E_joint``: summed joint-limit violation (rad).
+
+The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
+touches the object, its gradient there ignores the obstacle, and a line search stalls on it
+(every step that closes a finger crosses the kink). Squared hinges are C1, so poses slide
+along contact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from datagen.wrench import task_energy
+
+__all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
+
+
+@dataclass
+class HandObjectState:
+    """Everything the terms read, computed once per evaluation (B hand poses)."""
+
+    tips: torch.Tensor  # (B, F, 3) centres of the task fingertips' contact spheres, m
+    tip_distance: torch.Tensor  # (B, F) signed gap between contact sphere and object, m
+    contact_points: torch.Tensor  # (B, F, 3) nearest object points, m
+    contact_normals: torch.Tensor  # (B, F, 3) inward unit normals
+    sphere_penetration: torch.Tensor  # (B,) summed squared sphere penetration, m^2
+    max_penetration: torch.Tensor  # (B,) deepest sphere penetration, m
+    self_penetration: torch.Tensor  # (B,) summed squared pair overlap, m^2
+    joint_violation: torch.Tensor  # (B,) rad
+
+
+@dataclass
+class EnergyTerms:
+    """Unweighted terms ``(B,)`` and the weighted total."""
+
+    task: torch.Tensor
+    distance: torch.Tensor
+    penetration: torch.Tensor
+    self_penetration: torch.Tensor
+    joint_limits: torch.Tensor
+    total: torch.Tensor
+
+    def as_dict(self) -> dict[str, torch.Tensor]:
+        return {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
+
+
+def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor):
+    """SDF of per-sample objects: points ``(B, N, 3)`` -> distance ``(B, N)``, closest, normal."""
+    B, N, _ = points.shape
+    dist = points.new_zeros(B, N)
+    closest = torch.zeros_like(points)
+    normal = torch.zeros_like(points)
+    for k, target in enumerate(targets):
+        sel = (object_index == k).nonzero().squeeze(-1)
+        if sel.numel() == 0:
+            continue
+        res = target.query(points[sel])
+        dist = dist.index_copy(0, sel, res.distance.to(points.dtype))
+        closest = closest.index_copy(0, sel, res.closest.to(points.dtype))
+        normal = normal.index_copy(0, sel, res.normal.to(points.dtype))
+    return dist, closest, normal
+
+
+def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """Approximate (grid) signed distance of per-sample objects, ``(B, N)``."""
+    dist = points.new_zeros(points.shape[:-1])
+    for k, target in enumerate(targets):
+        sel = (object_index == k).nonzero().squeeze(-1)
+        if sel.numel():
+            dist = dist.index_copy(0, sel, target.distance(points[sel]).to(points.dtype))
+    return dist
+
+
+def contact_sphere_index(hand) -> torch.Tensor:
+    """(F,) index of each fingertip's contact sphere: its link's sphere nearest the pad point."""
+    out = []
+    for f, link in enumerate(hand.fingertip_link_index.tolist()):
+        cand = (hand.sphere_link_index == link).nonzero().squeeze(-1)
+        if cand.numel() == 0:
+            raise ValueError(f"hand {hand.name!r}: fingertip {hand.fingertip_names[f]!r} has no collision sphere on its link")
+        gap = (hand.sphere_centres_local[cand] - hand.fingertip_points_local[f]).norm(dim=-1) - hand.sphere_radii[cand]
+        out.append(cand[gap.abs().argmin()])
+    return torch.stack(out)
+
+
+def hand_object_state(hand, targets, object_index, root_pose, joints, finger_index, tip_spheres) -> HandObjectState:
+    """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
+
+    ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices.
+    """
+    T = hand.link_transforms(root_pose, joints)
+    centres, radii = hand.spheres(root_pose, joints, transforms=T)
+    tips = centres[:, tip_spheres]
+    d_c, closest, outward = _query_targets(targets, object_index, tips)
+    d_tip = d_c - radii[tip_spheres]
+    d_sph = _grid_distance(targets, object_index, centres)
+    pen = torch.relu(radii - d_sph)
+    lo, hi = hand.joint_lower, hand.joint_upper
+    violation = (torch.relu(joints - hi) + torch.relu(lo - joints)).sum(-1)
+    return HandObjectState(
+        tips=tips, tip_distance=d_tip, contact_points=closest, contact_normals=-outward,
+        sphere_penetration=(pen * pen).sum(-1), max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
+        self_penetration=hand.self_penetration(root_pose, joints, transforms=T).square().sum(-1),
+        joint_violation=violation,
+    )
+
+
+def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) -> EnergyTerms:
+    """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``."""
+    w = cfg.weights
+    if w.task > 0:
+        e_task = task_energy(
+            state.contact_points, state.contact_normals, cfg.mu, list(task.w_t), task.gamma_deg, directions,
+            kind=cfg.task_energy_kind, delta_deg=cfg.delta_deg, normalize=cfg.normalize,
+        ) / directions.shape[0]
+    else:
+        e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])
+    e_dist = (state.tip_distance**2).sum(-1)
+    total = (w.task * e_task + w.distance * e_dist + w.penetration * state.sphere_penetration
+             + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
+    return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total)

@@ -1,0 +1,84 @@
+"""Initial hand poses: the palm faces the object from outside its convex hull, fingers open.
+
+``surround`` (force closure, NOTES §2): a random point of the object's convex hull, pushed out
+along the hull normal by ``distance_m``; the palm's approach axis points back along the normal
+(tilted by up to ``tilt_deg``), rolled by up to ``roll_deg`` about it, origin jittered
+laterally by up to ``offset_m``. ``above``: the palm over the object's top, facing down (-z).
+Joints start at the hand's open pose. Everything is drawn from the passed generator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from datagen.synth.rotation import matrix_to_quat
+
+__all__ = ["initial_poses", "root_from_palm"]
+
+
+def _unit(x: torch.Tensor) -> torch.Tensor:
+    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def _any_perpendicular(a: torch.Tensor) -> torch.Tensor:
+    ref = torch.where((a[..., :1].abs() < 0.9), torch.tensor([1.0, 0, 0], dtype=a.dtype, device=a.device),
+                      torch.tensor([0, 1.0, 0], dtype=a.dtype, device=a.device))
+    return _unit(torch.linalg.cross(a, ref))
+
+
+def _rotate_about(v: torch.Tensor, axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    """Rodrigues rotation of ``v (..., 3)`` about unit ``axis (..., 3)`` by ``angle (...)``."""
+    c, s = torch.cos(angle)[..., None], torch.sin(angle)[..., None]
+    return v * c + torch.linalg.cross(axis, v) * s + axis * (axis * v).sum(-1, keepdim=True) * (1 - c)
+
+
+def root_from_palm(hand, origin: torch.Tensor, approach: torch.Tensor, thumb: torch.Tensor) -> torch.Tensor:
+    """Root poses ``(B, 7)`` placing the open hand's palm frame at world ``origin``/axes ``(B, 3)``."""
+    B = origin.shape[0]
+    ident = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
+    palm = hand.palm_frame(ident, hand.open_pose)
+    a_r, t_r = _unit(palm.approach), _unit(palm.thumb)
+    R_r = torch.stack([a_r, t_r, torch.linalg.cross(a_r, t_r)], dim=-1)  # (3, 3) columns
+    a_w, t_w = _unit(approach), _unit(thumb - (thumb * _unit(approach)).sum(-1, keepdim=True) * _unit(approach))
+    R_w = torch.stack([a_w, t_w, torch.linalg.cross(a_w, t_w)], dim=-1)  # (B, 3, 3)
+    R = R_w @ R_r.T
+    pos = origin - (R @ palm.origin[:, None]).squeeze(-1)
+    return torch.cat([pos, matrix_to_quat(R)], dim=-1).reshape(B, 7)
+
+
+def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator: torch.Generator):
+    """``(root_pose (B, 7), joints (B, J))`` for grasps on ``targets[object_index]``."""
+    B = object_index.shape[0]
+    dt, dev = hand.dtype, hand.device
+
+    def rand(*shape):
+        return torch.rand(*shape, generator=generator, dtype=torch.float64).to(dev, dt)
+
+    origin = torch.empty(B, 3, dtype=dt, device=dev)
+    normal = torch.empty(B, 3, dtype=dt, device=dev)
+    for k, target in enumerate(targets):
+        sel = (object_index == k).nonzero().squeeze(-1)
+        if sel.numel() == 0:
+            continue
+        if init_cfg.kind == "surround":
+            idx = (rand(sel.numel()) * target.hull_points.shape[0]).long().clamp_max(target.hull_points.shape[0] - 1)
+            origin[sel] = target.hull_points[idx].to(dev, dt)
+            normal[sel] = target.hull_normals[idx].to(dev, dt)
+        else:  # above: over the top of the hull, palm down
+            top = target.hull_points[:, 2].max().to(dev, dt)
+            origin[sel] = torch.stack([torch.zeros_like(top), torch.zeros_like(top), top]).expand(sel.numel(), 3)
+            normal[sel] = torch.tensor([0, 0, 1.0], dtype=dt, device=dev).expand(sel.numel(), 3)
+    lo, hi = init_cfg.distance_m
+    dist = lo + (hi - lo) * rand(B)
+    lateral = _any_perpendicular(normal)
+    lateral = _rotate_about(lateral, normal, 2 * math.pi * rand(B))
+    origin = origin + normal * dist[:, None] + lateral * (init_cfg.offset_m * (2 * rand(B) - 1))[:, None]
+    approach = -normal
+    tilt_axis = _rotate_about(_any_perpendicular(approach), approach, 2 * math.pi * rand(B))
+    approach = _rotate_about(approach, tilt_axis, math.radians(init_cfg.tilt_deg) * (2 * rand(B) - 1))
+    thumb = _rotate_about(_any_perpendicular(approach), approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
+    root = root_from_palm(hand, origin, approach, thumb)
+    joints = hand.open_pose.expand(B, -1).clone()
+    return root, joints

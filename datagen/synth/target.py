@@ -1,0 +1,76 @@
+"""What synthesis needs of an object: distance queries, its scale and hull for initialization."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import trimesh
+
+from datagen.objects.grid_sdf import GridSDF
+from datagen.objects.sdf import MeshSDF, SDFResult
+
+__all__ = ["GraspTarget"]
+
+
+@dataclass
+class GraspTarget:
+    """One object at one scale, in its own frame (origin at its bounding-box centre).
+
+    ``sdf`` holds the surface in normalized units; ``scale`` is metres per unit. ``hull_points``
+    ``(H, 3)`` metres and ``hull_normals`` ``(H, 3)`` outward unit sample the convex hull for
+    initial palm placements.
+    """
+
+    object_id: str
+    scale: float
+    sdf: MeshSDF
+    hull_points: torch.Tensor
+    hull_normals: torch.Tensor
+    object_path: str = ""  #: processed-object directory (for evaluation and provenance)
+    mesh_sha256: str = ""
+    grid: GridSDF | None = None  #: fast approximate distances for the collision spheres
+
+    @classmethod
+    def from_mesh(cls, mesh: trimesh.Trimesh, scale: float, object_id: str, *, object_path: str = "",
+                  mesh_sha256: str = "", hull_samples: int = 2048, seed: int = 0,
+                  grid_resolution: int = 64) -> "GraspTarget":
+        """From a mesh in normalized units (``scale`` metres per unit)."""
+        if not scale > 0:
+            raise ValueError(f"{object_id}: scale must be > 0 metres, got {scale}")
+        sdf = MeshSDF(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        grid = GridSDF.from_mesh(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed, exact=sdf)
+        hull = mesh.convex_hull
+        pts, faces = trimesh.sample.sample_surface_even(hull, hull_samples, seed=seed)
+        if len(pts) < 16:  # sample_surface_even can return few points on tiny hulls
+            pts, faces = trimesh.sample.sample_surface(hull, hull_samples, seed=seed)
+        return cls(object_id, float(scale), sdf,
+                   torch.as_tensor(np.asarray(pts) * scale, dtype=torch.float32),
+                   torch.as_tensor(hull.face_normals[faces], dtype=torch.float32),
+                   object_path=object_path, mesh_sha256=mesh_sha256, grid=grid)
+
+    @classmethod
+    def from_processed(cls, processed, scale: float, **kw) -> "GraspTarget":
+        """From a :class:`datagen.objects.process.ProcessedObject` (its watertight surface)."""
+        if not processed.ok:
+            raise ValueError(f"{processed.object_id}: object failed processing ({processed.reason}): {processed.message}")
+        mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
+        return cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
+                             mesh_sha256=processed.mesh_sha256, **kw)
+
+    def query(self, points: torch.Tensor) -> SDFResult:
+        """Signed distance (m, < 0 inside), closest point (m), outward normal for ``(..., 3)`` m."""
+        return self.sdf.query(points, self.scale)
+
+    def distance(self, points: torch.Tensor) -> torch.Tensor:
+        """Approximate signed distance (m) from the grid, ``(...)`` for ``(..., 3)`` m."""
+        return self.grid.distance(points, self.scale) if self.grid is not None else self.query(points).distance
+
+    def to(self, device) -> "GraspTarget":
+        self.sdf = self.sdf.to(device)
+        self.grid = self.grid.to(device) if self.grid is not None else None
+        self.hull_points = self.hull_points.to(device)
+        self.hull_normals = self.hull_normals.to(device)
+        return self
