@@ -1,0 +1,83 @@
+"""CLI subcommands of the evaluation: ``datagen eval`` and ``datagen render``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["register_eval", "register_render"]
+
+
+def _load_config(path: str | None, threads: int | None):
+    from .config import EvalConfig
+
+    cfg = EvalConfig.from_yaml(path) if path else EvalConfig()
+    if threads is not None:
+        cfg = EvalConfig.from_dict({**cfg.to_dict(), "threads": threads})
+    return cfg
+
+
+def register_eval(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("eval", help="simulate grasps in MuJoCo; add success, reason and metric columns")
+    p.add_argument("grasps", help="grasp table (Parquet), see datagen/eval/table.py for its columns")
+    p.add_argument("--out", required=True, help="evaluated table (Parquet)")
+    p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol)")
+    p.add_argument("--workers", type=int, default=1, help="processes evaluating rows in parallel")
+    p.add_argument("--threads", type=int, default=None, help="threads per grasp stepping the directions")
+    p.set_defaults(func=_eval)
+
+
+def _eval(args) -> int:
+    import pyarrow.parquet as pq
+
+    from .table import evaluate_table, read_grasps
+
+    cfg = _load_config(args.config, args.threads)
+    table = read_grasps(args.grasps)
+    t0 = time.perf_counter()
+    out = evaluate_table(table, cfg, base=Path(args.grasps).resolve().parent, workers=args.workers)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(out, args.out)
+    ok = sum(out.column("success").to_pylist())
+    print(f"wrote {args.out}: {out.num_rows} grasps, {ok} successful, "
+          f"{time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    return 0
+
+
+def register_render(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("render", help="PNG pictures of grasps (initial pose, grasp, after the squeeze)")
+    p.add_argument("grasps", help="grasp table (Parquet)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--rows", type=int, nargs="+", default=None, help="row indices (default: the first 4)")
+    p.add_argument("--config", default=None, help="EvalConfig YAML")
+    p.add_argument("--width", type=int, default=320)
+    p.add_argument("--height", type=int, default=240)
+    p.set_defaults(func=_render)
+
+
+def _render(args) -> int:
+    from datagen.hands import load_hand
+
+    from .render import render_grasp
+    from .scene import build_scene
+    from .table import read_grasps, row_pieces, row_poses
+
+    cfg = _load_config(args.config, None)
+    table = read_grasps(args.grasps)
+    base = Path(args.grasps).resolve().parent
+    indices = args.rows if args.rows is not None else list(range(min(4, table.num_rows)))
+    hands = {}
+    for i in indices:
+        if not 0 <= i < table.num_rows:
+            raise ValueError(f"row {i} is out of range (the table has {table.num_rows} rows)")
+        row = table.slice(i, 1).to_pylist()[0]
+        name = str(row["hand"])
+        hands.setdefault(name, load_hand(name))
+        test = cfg.task_test(str(row["task"]))
+        scene = build_scene(hands[name], row_pieces(row, base), cfg, test)
+        path = render_grasp(scene, row_poses(row), cfg, Path(args.out) / f"grasp_{i:06d}_{row['object_id']}.png",
+                            width=args.width, height=args.height)
+        print(path)
+    return 0

@@ -1,0 +1,85 @@
+"""PNG pictures of grasps for debugging and the dataset report (MuJoCo offscreen rendering).
+
+Each picture is a grid: columns = the initial pose (hand at the pregrasp), the grasp pose, and
+the simulated state after pregrasp -> grasp -> squeeze; rows = two views of the object (from
+the side opposite the hand, looking at the palm, and from 90 degrees around).
+CPU: ``MUJOCO_GL=osmesa`` (``apt-get install -y libosmesa6`` and PyOpenGL); GPU:
+``MUJOCO_GL=egl``. The variable is read when mujoco is first imported, so set it in the
+environment. The renderer is closed explicitly (its destructor raises at interpreter exit).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from datagen.hands.render import write_png
+
+from .config import EvalConfig, EvalError
+from .hold import close_hand, initial_state
+from .metrics import set_static_pose
+from .scene import Scene
+
+__all__ = ["render_grasp", "grasp_frames"]
+
+
+def _cameras(scene: Scene, poses: np.ndarray) -> list[mujoco.MjvCamera]:
+    toward_hand = poses[1, :3] / max(np.linalg.norm(poses[1, :3]), 1e-9)
+    az = float(np.degrees(np.arctan2(toward_hand[1], toward_hand[0])))
+    dist = max(0.25, 5.0 * scene.objects.scale)
+    cams = []
+    for offset in (0.0, 90.0):  # the camera looks along its azimuth: from beyond the object towards the hand
+        cam = mujoco.MjvCamera()
+        cam.lookat[:] = 0.0
+        cam.distance = dist
+        cam.azimuth = az + offset
+        cam.elevation = -25.0
+        cams.append(cam)
+    return cams
+
+
+def grasp_frames(scene: Scene, poses: np.ndarray, cfg: EvalConfig, *, width: int = 320,
+                 height: int = 240) -> np.ndarray:
+    """(2 * height, 3 * width, 3) uint8 image grid of one grasp (see module docstring)."""
+    model = scene.model
+    data = mujoco.MjData(model)
+    try:
+        renderer = mujoco.Renderer(model, height=height, width=width)
+    except Exception as exc:
+        raise EvalError("grasp rendering", f"cannot open an offscreen GL context: {exc}",
+                        "set MUJOCO_GL=osmesa (apt-get install -y libosmesa6) or MUJOCO_GL=egl") from None
+    try:
+        cams = _cameras(scene, poses)
+        columns = []
+        states = []
+        set_static_pose(scene, data, poses[0])
+        mujoco.mj_forward(model, data)
+        states.append(mujoco.MjData(model))
+        mujoco.mj_copyData(states[-1], model, data)
+        set_static_pose(scene, data, poses[1])
+        mujoco.mj_forward(model, data)
+        states.append(mujoco.MjData(model))
+        mujoco.mj_copyData(states[-1], model, data)
+        initial_state(scene, data, poses[0])
+        close_hand(scene, data, poses, cfg)
+        mujoco.mj_forward(model, data)
+        states.append(data)
+        for st in states:
+            frames = []
+            for cam in cams:
+                renderer.update_scene(st, camera=cam)
+                frames.append(renderer.render().copy())
+            columns.append(np.concatenate(frames, axis=0))
+        return np.concatenate(columns, axis=1)
+    finally:
+        renderer.close()
+
+
+def render_grasp(scene: Scene, poses: np.ndarray, cfg: EvalConfig, path: str | Path, **kw) -> Path:
+    """Write `grasp_frames` of ``poses`` (3, 7 + J) to ``path`` (PNG); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_png(path, grasp_frames(scene, poses, cfg, **kw))
+    return path

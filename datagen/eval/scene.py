@@ -1,0 +1,207 @@
+"""The evaluation scene: a hand and an object's convex pieces in one MuJoCo model (via MjSpec).
+
+World frame = object frame. The hand's flattened MJCF (``HandModel.mjcf_path``) is attached
+under ``hand_base``, a body with a free joint welded to the mocap body ``hand_mocap``; the hand
+is driven by moving the mocap body and by its position actuators (gains set from the config).
+The object is one body of the convex pieces at ``scale`` metres per normalized unit, total
+mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
+hinge/slide joint of a task. Every geom gets the config's condim, friction and margin; hand
+geoms get the hand solimp/solref.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from .config import EvalConfig, EvalError, TaskTest
+
+__all__ = ["ObjectPieces", "Scene", "build_scene", "pieces_from_processed", "HAND_PREFIX"]
+
+HAND_PREFIX = "hand/"
+_INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "rk4": mujoco.mjtIntegrator.mjINT_RK4,
+                "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+                "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST}
+_CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
+
+
+@dataclass(frozen=True)
+class ObjectPieces:
+    """An object as convex mesh pieces in normalized units (files MuJoCo can read: OBJ/STL).
+
+    ``volumes`` (P,) any common unit, only their ratios matter (the mass split); ``scale`` is
+    metres per normalized unit (the manifest's object scale)."""
+
+    object_id: str
+    paths: tuple[Path, ...]
+    volumes: tuple[float, ...]
+    scale: float
+
+    def __post_init__(self) -> None:
+        paths = tuple(Path(p) for p in self.paths)
+        object.__setattr__(self, "paths", paths)
+        object.__setattr__(self, "volumes", tuple(float(v) for v in self.volumes))
+        if not paths or len(paths) != len(self.volumes):
+            raise EvalError(f"object {self.object_id!r}", f"needs one volume per piece ({len(paths)} pieces, "
+                            f"{len(self.volumes)} volumes)")
+        if not all(v > 0 for v in self.volumes) or not self.scale > 0:
+            raise EvalError(f"object {self.object_id!r}", "piece volumes and the scale must be > 0")
+        missing = [str(p) for p in paths if not p.is_file()]
+        if missing:
+            raise EvalError(f"object {self.object_id!r}", f"piece files not found: {missing[:3]}",
+                            "re-run `datagen prepare` or fix object_path")
+
+
+def pieces_from_processed(processed, scale: float) -> ObjectPieces:
+    """`ObjectPieces` of a `datagen.objects.ProcessedObject` (status ok) at ``scale`` metres."""
+    if not processed.ok:
+        raise EvalError(f"object {processed.object_id!r}", f"processing failed ({processed.reason})",
+                        "evaluate grasps of successfully processed objects only")
+    return ObjectPieces(processed.object_id, tuple(processed.piece_paths), tuple(processed.piece_volumes),
+                        float(scale))
+
+
+@dataclass
+class Scene:
+    """A compiled scene and the indices evaluation needs (see the module docstring).
+
+    Shapes: J hand joints (in ``hand.joint_names`` order), nu actuators, G hand collision
+    geoms, P object geoms."""
+
+    model: mujoco.MjModel
+    hand: object                     # datagen.hands.HandModel
+    objects: ObjectPieces
+    joint: str                       # "free", "hinge" or "slide"
+    hand_qpos_adr: np.ndarray        # (J,) qpos address of each hand joint
+    hand_free_qpos: int              # qpos address of the hand root's free joint (7 values)
+    hand_free_dof: int               # dof address of the hand root's free joint (6 values)
+    object_qpos: int                 # qpos address of the object's joint
+    object_dof: int
+    object_body: int
+    mocap: int                       # mocap index of hand_mocap
+    actuators: np.ndarray            # (nu,) scene actuator ids in the hand's actuator order
+    ctrl_matrix: np.ndarray          # (nu, J) ctrl = A @ joints
+    ctrl_range: np.ndarray           # (nu, 2)
+    hand_geoms: np.ndarray           # (G,) hand collision geom ids
+    hand_geom_link: np.ndarray       # (G,) index into hand.link_names of each hand geom's body
+    object_geoms: np.ndarray         # (P,) object geom ids
+    self_pairs: np.ndarray | None = None  # (S, 2) hand geom pairs of the self-penetration metric (lazy)
+
+    @property
+    def object_mass(self) -> float:
+        return float(self.model.body_subtreemass[self.object_body])
+
+    def ctrl(self, joints: np.ndarray) -> np.ndarray:
+        """(nu,) actuator targets for joints (J,) radians, clipped to the control range."""
+        return np.clip(self.ctrl_matrix @ joints, self.ctrl_range[:, 0], self.ctrl_range[:, 1])
+
+
+def _set_contact(geom, cfg: EvalConfig, hand: bool) -> None:
+    geom.condim = cfg.condim
+    geom.friction = [cfg.friction[0], cfg.friction[1], 1e-4]
+    geom.margin = cfg.geom_margin_m
+    geom.gap = 0.0
+    if hand:
+        geom.solimp[:3] = cfg.hand_solimp
+        geom.solref = list(cfg.hand_solref)
+
+
+def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | None = None) -> Scene:
+    """Compile the scene of ``hand`` (a `HandModel`) and ``pieces``; ``task`` selects the
+    object's joint (None: free). Raises `EvalError` if MuJoCo rejects the model."""
+    spec = mujoco.MjSpec()
+    opt = spec.option
+    opt.timestep = cfg.timestep_s
+    opt.gravity = list(cfg.gravity)
+    opt.integrator = _INTEGRATORS[cfg.integrator]
+    opt.cone = _CONES[cfg.cone]
+    opt.impratio = cfg.impratio
+    opt.noslip_iterations = cfg.noslip_iterations
+    spec.compiler.degree = False
+
+    hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
+    base = spec.worldbody.add_body(name="hand_base")
+    base.add_freejoint(name="hand_free")
+    # the scene keeps its own solver options and sizes; the hand's user-field sizes are adopted
+    for k in ("timestep", "gravity", "integrator", "cone", "impratio", "noslip_iterations", "iterations",
+              "tolerance", "ls_iterations", "solver", "jacobian"):
+        setattr(hand_spec.option, k, getattr(spec.option, k))
+    hand_spec.njmax, hand_spec.nconmax = spec.njmax, spec.nconmax
+    for k in ("nuser_jnt", "nuser_site", "nuser_tendon", "nuser_actuator", "nuser_sensor", "nuser_body",
+              "nuser_geom", "nuser_cam"):
+        setattr(spec, k, getattr(hand_spec, k))
+    base.add_frame().attach_body(hand_spec.body(hand.spec.root_body), HAND_PREFIX, "")
+    spec.worldbody.add_body(name="hand_mocap", mocap=True)
+    weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                             name1="hand_mocap", name2="hand_base")
+    # data = anchor (3), relpose pos (3) and quat (4), torquescale, flag (0: relpose as given)
+    weld.data[:12] = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0]
+    weld.solref = list(cfg.weld_solref)
+
+    for g in spec.geoms:
+        _set_contact(g, cfg, hand=True)
+    for p in spec.pairs:  # explicit self-collision pairs of the hand MJCF
+        p.condim = cfg.condim
+        p.friction = [cfg.friction[0], cfg.friction[0], cfg.friction[1], 1e-4, 1e-4]
+        p.solimp[:3] = cfg.hand_solimp
+        p.solref = list(cfg.hand_solref)
+        p.margin = cfg.geom_margin_m
+    for a in spec.actuators:
+        a.gainprm[0] = cfg.actuator_kp
+        a.biasprm[1] = -cfg.actuator_kp
+        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        a.forcerange = [-cfg.actuator_force_limit, cfg.actuator_force_limit]
+
+    body = spec.worldbody.add_body(name="object")
+    if task is None or task.joint == "free":
+        body.add_freejoint(name="object_joint")
+    else:
+        kind = mujoco.mjtJoint.mjJNT_HINGE if task.joint == "hinge" else mujoco.mjtJoint.mjJNT_SLIDE
+        body.add_joint(name="object_joint", type=kind, axis=list(task.axis), pos=list(task.anchor),
+                       damping=0.0, armature=0.0)
+    total = sum(pieces.volumes)
+    s = pieces.scale
+    for i, (path, vol) in enumerate(zip(pieces.paths, pieces.volumes)):
+        spec.add_mesh(name=f"object_piece_{i}", file=str(path.resolve()), scale=[s, s, s],
+                      inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX)
+        g = body.add_geom(name=f"object_geom_{i}", type=mujoco.mjtGeom.mjGEOM_MESH,
+                          meshname=f"object_piece_{i}", mass=cfg.object_mass_kg * vol / total,
+                          rgba=[0.85, 0.55, 0.2, 1.0])
+        _set_contact(g, cfg, hand=False)
+    spec.worldbody.add_light(pos=[0, 0, 1.5], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+                             castshadow=False)
+    try:
+        model = spec.compile()
+    except Exception as exc:
+        raise EvalError(f"scene of hand {hand.name!r} and object {pieces.object_id!r}",
+                        f"MuJoCo cannot compile it: {str(exc).strip()}") from None
+    return _index(model, hand, pieces, "free" if task is None else task.joint)
+
+
+def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str) -> Scene:
+    J = hand.num_joints
+    qadr = np.array([model.jnt_qposadr[model.joint(HAND_PREFIX + n).id] for n in hand.joint_names])
+    free = model.joint("hand_free").id
+    oj = model.joint("object_joint").id
+    acts = np.array([model.actuator(HAND_PREFIX + n).id for n in hand.actuator_names], dtype=np.int64)
+    link_index = {HAND_PREFIX + n: i for i, n in enumerate(hand.link_names)}
+    hand_geoms, hand_link = [], []
+    obody = model.body("object").id
+    for g in range(model.ngeom):
+        b = model.body(model.geom_bodyid[g]).name
+        if b in link_index and (model.geom_contype[g] or model.geom_conaffinity[g]):
+            hand_geoms.append(g)
+            hand_link.append(link_index[b])
+    obj_geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] == obody])
+    A = hand.ctrl_matrix.detach().cpu().double().numpy()
+    if A.shape != (len(acts), J):
+        raise EvalError(f"hand {hand.name!r}", f"control matrix {A.shape} does not match {len(acts)} actuators")
+    return Scene(model=model, hand=hand, objects=pieces, joint=joint, hand_qpos_adr=qadr,
+                 hand_free_qpos=int(model.jnt_qposadr[free]), hand_free_dof=int(model.jnt_dofadr[free]),
+                 object_qpos=int(model.jnt_qposadr[oj]), object_dof=int(model.jnt_dofadr[oj]),
+                 object_body=obody, mocap=int(model.body_mocapid[model.body("hand_mocap").id]),
+                 actuators=acts, ctrl_matrix=A, ctrl_range=model.actuator_ctrlrange[acts].copy(),
+                 hand_geoms=np.array(hand_geoms), hand_geom_link=np.array(hand_link), object_geoms=obj_geoms)

@@ -1,0 +1,169 @@
+"""Grasp tables in and out: the columns ``datagen eval`` reads and the ones it adds.
+
+Input (Parquet, one row per grasp; other columns are kept as they are):
+
+    object_id       string
+    object_scale    float   metres per normalized unit
+    hand            string  built-in hand name or hand spec YAML path (`datagen.hands.load_hand`)
+    task            string  ``force_closure`` (six directions) or a task of `EvalConfig.tasks`
+    pregrasp_qpos, grasp_qpos, squeeze_qpos
+                    list<float32> (7 + J): [x y z qw qx qy qz] + joints in the hand MJCF's joint
+                    order, object frame (metres, radians)
+    object_path     string  the processed object's cache entry directory (``ProcessedObject.entry``:
+                    meta.json, coacd/ pieces), absolute or relative to the table's directory
+    w_t             list<float32> (6), optional: the task wrench; used by task tests (see
+                    `Evaluator.evaluate`), ignored by the six-direction test
+
+Output: the input columns plus `EVAL_COLUMNS` (below; units in the names). Row order is kept.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from .config import EvalConfig, EvalError
+from .evaluate import Evaluator, GraspResult
+from .scene import ObjectPieces, pieces_from_processed
+
+__all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "evaluate_table",
+           "read_grasps", "row_poses", "row_pieces"]
+
+EVAL_SCHEMA_VERSION = 1
+INPUT_COLUMNS = ("object_id", "object_scale", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
+                 "object_path")
+_F32, _LF32 = pa.float32(), pa.list_(pa.float32())
+# name -> (Arrow type, description with units)
+EVAL_COLUMNS: dict[str, tuple[pa.DataType, str]] = {
+    "success": (pa.bool_(), "the grasp passed every test and filter"),
+    "reason": (pa.string(), "reason code: ok, invalid_grasp, penetration, no_contact, grasp_penetration, "
+                            "self_penetration, low_epsilon, unstable, slipped_<dir>, slipped_task"),
+    "eval_test": (pa.string(), "six_direction or the task name"),
+    "dir_success": (pa.list_(pa.bool_()), "per direction (+x -x +y -y +z -z, or the task): null = not run"),
+    "dir_translation_m": (_LF32, "largest object displacement seen per direction, m (NaN = not run)"),
+    "dir_rotation_deg": (_LF32, "largest object rotation seen per direction, degrees (NaN = not run)"),
+    "pregrasp_penetration_m": (_F32, "max hand-object depth at the pregrasp, m"),
+    "penetration_m": (_F32, "max hand-object depth at the grasp, m"),
+    "self_penetration_m": (_F32, "max hand self-penetration depth at the grasp, m"),
+    "min_distance_m": (_F32, "smallest signed hand-object distance at the grasp, m"),
+    "finger_distance_m": (_LF32, "signed fingertip-link distance to the object at the grasp, m, "
+                                 "hand.fingertip_names order"),
+    "touching_links": (pa.int32(), "hand links within touch_distance_m at the grasp"),
+    "num_contacts": (pa.int32(), "contacts (hand geoms within contact_distance_m) of the epsilon metric"),
+    "epsilon": (_F32, "epsilon metric of those contacts (0: not force closure)"),
+}
+
+
+def read_grasps(path: str | Path) -> pa.Table:
+    """Read a grasp table and check its columns (raises `EvalError` naming the missing ones)."""
+    path = Path(path)
+    if not path.is_file():
+        raise EvalError(str(path), "grasp table not found")
+    table = pq.read_table(path)
+    missing = [c for c in INPUT_COLUMNS if c not in table.column_names]
+    if missing:
+        raise EvalError(str(path), f"missing columns {missing}", f"a grasp table needs {list(INPUT_COLUMNS)}")
+    return table
+
+
+def row_poses(row: dict) -> np.ndarray:
+    """(3, 7 + J) float64 pregrasp, grasp, squeeze of a table row."""
+    rows = [np.asarray(row[k], dtype=np.float64) for k in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")]
+    if len({r.shape for r in rows}) != 1 or rows[0].ndim != 1:
+        raise EvalError(f"grasp of object {row.get('object_id')!r}", "pregrasp/grasp/squeeze rows differ in length")
+    return np.stack(rows)
+
+
+def row_pieces(row: dict, base: Path) -> ObjectPieces:
+    """The object of a table row (``object_path`` resolved against ``base``)."""
+    from datagen.objects import load_processed
+
+    entry = Path(row["object_path"])
+    entry = entry if entry.is_absolute() else base / entry
+    try:
+        processed = load_processed(entry)
+    except (OSError, ValueError, KeyError) as exc:
+        raise EvalError(f"object {row['object_id']!r}", f"cannot read the processed object at {entry}: {exc}",
+                        "object_path must be a processed object's cache entry (datagen prepare)") from None
+    return pieces_from_processed(processed, float(row["object_scale"]))
+
+
+def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspResult]:
+    """Evaluate rows in this process (one `Evaluator` per hand)."""
+    import torch
+
+    from datagen.hands import load_hand
+
+    torch.set_num_threads(1)  # one core per worker; the epsilon search is small
+    cfg = EvalConfig.from_dict(cfg_dict)
+    evaluators: dict[str, Evaluator] = {}
+    out = []
+    try:
+        for row in rows:
+            hand = str(row["hand"])
+            if hand not in evaluators:
+                evaluators[hand] = Evaluator(load_hand(hand), cfg)
+            out.append(evaluators[hand].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
+                                                 w_t=row.get("w_t")))
+    finally:
+        for ev in evaluators.values():
+            ev.close()
+    return out
+
+
+def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1) -> pa.Table:
+    """``table`` with `EVAL_COLUMNS` appended (replaced if present). ``workers`` > 1 splits the
+    rows into contiguous chunks evaluated by a process pool (results are identical)."""
+    names = list(INPUT_COLUMNS) + (["w_t"] if "w_t" in table.column_names else [])
+    rows = table.select(names).to_pylist()
+    cfg_d = cfg.to_dict()
+    if workers <= 1 or len(rows) < 2:
+        results = _evaluate_rows(rows, str(base), cfg_d)
+    else:
+        n = min(workers, len(rows))
+        bounds = np.linspace(0, len(rows), n + 1).astype(int)
+        with ProcessPoolExecutor(n) as pool:
+            parts = pool.map(_evaluate_rows, [rows[a:b] for a, b in zip(bounds[:-1], bounds[1:])],
+                             [str(base)] * n, [cfg_d] * n)
+            results = [r for part in parts for r in part]
+    return append_results(table, results)
+
+
+def _f(x: float) -> float | None:
+    return None if x is None else float(x)
+
+
+def append_results(table: pa.Table, results: list[GraspResult]) -> pa.Table:
+    """``table`` with the `EVAL_COLUMNS` of ``results`` (one per row, same order)."""
+    if len(results) != table.num_rows:
+        raise EvalError("eval results", f"{len(results)} results for {table.num_rows} rows")
+    values = {
+        "success": [r.success for r in results],
+        "reason": [r.reason for r in results],
+        "eval_test": [r.test for r in results],
+        "dir_success": [list(r.direction_success) for r in results],
+        "dir_translation_m": [[_f(x) for x in r.direction_translation_m] for r in results],
+        "dir_rotation_deg": [[_f(x) for x in r.direction_rotation_deg] for r in results],
+        "pregrasp_penetration_m": [r.pregrasp_penetration_m for r in results],
+        "penetration_m": [r.penetration_m for r in results],
+        "self_penetration_m": [r.self_penetration_m for r in results],
+        "min_distance_m": [r.min_distance_m for r in results],
+        "finger_distance_m": [[_f(x) for x in r.finger_distance_m] for r in results],
+        "touching_links": [r.touching_links for r in results],
+        "num_contacts": [r.num_contacts for r in results],
+        "epsilon": [r.epsilon if not math.isnan(r.epsilon) else float("nan") for r in results],
+    }
+    for name, (dtype, _) in EVAL_COLUMNS.items():
+        col = pa.array(values[name], type=dtype)
+        if name in table.column_names:
+            table = table.set_column(table.column_names.index(name), name, col)
+        else:
+            table = table.append_column(name, col)
+    meta = dict(table.schema.metadata or {})
+    meta[b"datagen.eval_schema_version"] = str(EVAL_SCHEMA_VERSION).encode()
+    return table.replace_schema_metadata(meta)

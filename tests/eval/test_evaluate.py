@@ -1,0 +1,160 @@
+"""Six-direction hold test, task test, reasons and determinism on grasps built with MuJoCo."""
+
+import math
+
+import mujoco
+import pytest
+
+from datagen.eval import EvalConfig, EvalError, Evaluator, TaskTest
+
+from .grasps import box_grasp
+
+pytestmark = pytest.mark.mujoco
+
+HALF = (0.03, 0.015, 0.03)  # m: a 6 x 3 x 6 cm box (scale = half-diagonal 4.5 cm)
+
+
+@pytest.fixture(scope="module")
+def evaluator(shadow):
+    with Evaluator(shadow, EvalConfig(stop_at_first_failure=False)) as ev:
+        yield ev
+
+
+@pytest.fixture(scope="module")
+def good(evaluator, box_dir):
+    return box_grasp(evaluator, HALF, drop=0.0, directory=box_dir)
+
+
+@pytest.fixture(scope="module")
+def partial(evaluator, box_dir):
+    # box lower in the hand: the fingers only reach its top edge, nothing stops it sideways
+    return box_grasp(evaluator, HALF, drop=0.03, directory=box_dir)
+
+
+def test_constructed_grasp_passes_all_six(evaluator, good):
+    pieces, poses = good
+    r = evaluator.evaluate(pieces, poses)
+    assert r.success and r.reason == "ok" and r.test == "six_direction"
+    assert r.direction_success == (True,) * 6
+    assert max(r.direction_translation_m) < 0.05 and max(r.direction_rotation_deg) < 15.0
+    assert r.touching_links >= 2 and r.num_contacts >= 2
+    assert r.penetration_m < 1e-6 and r.pregrasp_penetration_m == 0.0  # touching, not overlapping
+    assert r.sim_steps == 2 * 10 * 10 + 6 * 500
+
+
+def test_hand_away_from_object_is_no_contact(shadow, evaluator, good):
+    pieces, poses = good
+    far = poses.copy()
+    far[:, 1] += 0.5  # 50 cm away along y, fingers still closing on nothing
+    r = evaluator.evaluate(pieces, far)
+    assert not r.success and r.reason == "no_contact"
+    assert r.direction_success == (None,) * 6 and r.sim_steps == 0
+    assert r.touching_links == 0 and r.min_distance_m > 0.04
+    # simulated anyway (contact check off), nothing holds the object: every direction fails
+    with Evaluator(shadow, EvalConfig(min_touching_links=0, stop_at_first_failure=False)) as ev:
+        s = ev.evaluate(pieces, far)
+    assert s.direction_success == (False,) * 6 and s.reason == "slipped_+x"
+    # free flight under 1 N on 0.1 kg, a = 10 m/s^2: the first check (n = 50 steps of dt = 4 ms)
+    # already fails; semi-implicit Euler gives x_n = a dt^2 n (n - 1) / 2 = 0.196 m
+    expected = 10.0 * 0.004**2 * 50 * 49 / 2
+    assert all(abs(t - expected) < 1e-9 for t in s.direction_translation_m)
+    assert s.sim_steps == 200 + 6 * 50
+
+
+def test_grasp_holding_some_directions_fails(evaluator, partial):
+    pieces, poses = partial
+    r = evaluator.evaluate(pieces, poses)
+    held = [d for d, ok in zip(("+x", "-x", "+y", "-y", "+z", "-z"), r.direction_success) if ok]
+    failed = [d for d, ok in zip(("+x", "-x", "+y", "-y", "+z", "-z"), r.direction_success) if ok is False]
+    assert not r.success and held and failed and len(held) + len(failed) == 6
+    assert r.reason == f"slipped_{failed[0]}"
+    # the default early stop gives the same verdict and stops every direction together
+    with Evaluator(evaluator.hand, EvalConfig()) as ev:
+        e = ev.evaluate(pieces, poses)
+    assert (e.success, e.reason) == (r.success, r.reason)
+    assert None in e.direction_success and e.sim_steps < r.sim_steps
+
+
+def test_results_are_deterministic_serial_and_threaded(shadow, evaluator, good, partial):
+    for pieces, poses in (good, partial):
+        a = evaluator.evaluate(pieces, poses)
+        b = evaluator.evaluate(pieces, poses)
+        with Evaluator(shadow, EvalConfig(stop_at_first_failure=False, threads=3)) as ev:
+            c = ev.evaluate(pieces, poses)
+        assert a == b == c  # bit-identical floats, no NaN in these results
+
+
+def test_early_stop_is_deterministic_across_threads(shadow, partial):
+    pieces, poses = partial
+    out = []
+    for threads in (1, 2, 6):
+        with Evaluator(shadow, EvalConfig(threads=threads)) as ev:
+            out.append(ev.evaluate(pieces, poses))
+    assert all(_same(out[0], o) for o in out[1:])
+
+
+def _same(a, b) -> bool:
+    def eq(x, y):
+        if isinstance(x, tuple):
+            return len(x) == len(y) and all(eq(u, v) for u, v in zip(x, y))
+        if isinstance(x, float) and math.isnan(x):
+            return isinstance(y, float) and math.isnan(y)
+        return x == y
+
+    return all(eq(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+
+
+def test_task_tests_on_virtual_joints(shadow, good, partial):
+    tasks = {
+        "turn": TaskTest(w_t=(0, 0, 0, 0, 0, 1), joint="hinge", axis=(0, 0, 1)),
+        "push": TaskTest(w_t=(0, 0, -1, 0, 0, 0), joint="slide", axis=(0, 0, 1)),
+        "drag_x": TaskTest(w_t=(-1, 0, 0, 0, 0, 0), joint="slide", axis=(1, 0, 0)),  # disturbance +x
+        "tilt": TaskTest(w_t=(0, 0, 0, 1, 0, 0), joint="hinge", axis=(1, 0, 0)),
+    }
+    with Evaluator(shadow, EvalConfig(tasks=tasks)) as ev:
+        pieces, poses = good
+        for name in ("turn", "push", "drag_x"):
+            r = ev.evaluate(pieces, poses, task=name)
+            assert r.success and r.reason == "ok" and r.test == name and len(r.direction_success) == 1
+        pieces, poses = partial
+        r = ev.evaluate(pieces, poses, task="drag_x")  # on a prismatic joint this grasp holds along x
+        assert r.success and r.direction_rotation_deg[0] < 1e-6  # (and the joint cannot rotate the box)
+        r = ev.evaluate(pieces, poses, task="turn")  # but lets the box turn about z
+        assert not r.success and r.reason == "slipped_task" and r.direction_success == (False,)
+        assert r.direction_rotation_deg[0] >= 15.0 and r.direction_translation_m[0] < 1e-9  # hinge at the origin
+        # the row's w_t replaces the configured one: this grasp resists one sense of tilt only
+        assert ev.evaluate(pieces, poses, task="tilt").reason == "slipped_task"
+        assert ev.evaluate(pieces, poses, task="tilt", w_t=(0, 0, 0, -1, 0, 0)).reason == "ok"
+        scene, _ = ev.scene(pieces, tasks["drag_x"])
+        assert scene.model.jnt_type[scene.model.joint("object_joint").id] == int(mujoco.mjtJoint.mjJNT_SLIDE)
+
+
+def test_squeeze_alone_does_not_make_a_grasp(shadow, evaluator, good):
+    pieces, poses = good
+    q = poses[1, 7:]
+    loose = poses.copy()
+    loose[0, 7:], loose[1, 7:], loose[2, 7:] = 0.4 * q, 0.5 * q, 1.3 * q  # only the squeeze reaches the box
+    r = evaluator.evaluate(pieces, loose)
+    assert r.reason == "no_contact" and r.touching_links < 2 and r.sim_steps == 0
+    with Evaluator(shadow, EvalConfig(min_touching_links=0)) as ev:
+        assert ev.evaluate(pieces, loose).reason == "ok"  # the squeeze alone would have held it
+
+
+def test_deep_pregrasp_is_rejected_before_simulating(evaluator, good):
+    pieces, poses = good
+    deep = poses.copy()
+    deep[0, 1] -= 0.03  # pregrasp root 3 cm towards the box: the palm is ~2 cm inside it
+    r = evaluator.evaluate(pieces, deep)
+    assert r.reason == "penetration" and r.sim_steps == 0 and r.pregrasp_penetration_m > 0.01
+    assert r.penetration_m < 1e-6  # the grasp pose itself is fine
+
+
+def test_bad_rows(evaluator, good):
+    pieces, poses = good
+    bad = poses.copy()
+    bad[1, 9] = float("nan")
+    assert evaluator.evaluate(pieces, bad).reason == "invalid_grasp"
+    with pytest.raises(EvalError, match="expected"):
+        evaluator.evaluate(pieces, poses[:, :-1])
+    with pytest.raises(EvalError, match="open_sesame"):
+        evaluator.evaluate(pieces, poses, task="open_sesame")
