@@ -6,7 +6,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: install test bench-gws clean-venv bench-objects
+.PHONY: install test bench-gws bench-synth clean-venv bench-objects
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,9 @@ test: $(STAMP) hands
 
 bench-gws: $(STAMP)
 	$(PY) -m benchmarks.bench_gws
+
+bench-synth: $(STAMP)
+	$(PY) -m benchmarks.bench_synth
 
 clean-venv:
 	rm -rf $(VENV)
@@ -54,3 +57,20 @@ hand-specs: $(STAMP)
 
 bench-eval: $(STAMP)
 	$(PY) -m benchmarks.bench_eval $(BENCH_EVAL_ARGS)
+
+# Dataset pipeline (issue 7): `make dataset SCALE=N` runs or resumes the job in $(OUT) on Ray
+# (local, all cores, unless RAY_ADDRESS names a cluster). See README "Building a dataset".
+.PHONY: dataset bench-pipeline
+SCALE ?= 6
+OUT ?= jobs/default
+HAND ?= shadow
+TASKS ?= force_closure
+SOURCE ?= procedural
+DATASET_ARGS ?=
+
+dataset: $(STAMP)
+	$(PY) -m datagen.cli run --out $(OUT) --scale $(SCALE) --hand $(HAND) --tasks $(TASKS) \
+		--source $(SOURCE) $(DATASET_ARGS)
+
+bench-pipeline: $(STAMP)
+	$(PY) -m benchmarks.bench_pipeline

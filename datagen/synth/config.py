@@ -138,6 +138,8 @@ class SynthConfig:
     momentum: float = 0.9  #: m <- (momentum * m + g) / 2 on per-group normalized gradients
     squeeze_rad: float = 0.1  #: pregrasp opens each joint by up to this towards the open pose
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
+    sphere_margin_m: float = 0.0015  #: spheres overshoot the hand's collision shapes (<= 2.8 mm): they may sink this far
+    exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seed: int = 0
 
     def __post_init__(self):

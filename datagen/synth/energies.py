@@ -58,8 +58,11 @@ class EnergyTerms:
         return {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
 
 
-def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor):
-    """SDF of per-sample objects: points ``(B, N, 3)`` -> distance ``(B, N)``, closest, normal."""
+def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, exact: bool = True):
+    """SDF of per-sample objects: points ``(B, N, 3)`` -> distance ``(B, N)``, closest, normal.
+
+    ``exact=False`` uses the objects' SDF grids (fast, ~0.2 mm) instead of the exact mesh.
+    """
     B, N, _ = points.shape
     dist = points.new_zeros(B, N)
     closest = torch.zeros_like(points)
@@ -68,10 +71,14 @@ def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor):
         sel = (object_index == k).nonzero().squeeze(-1)
         if sel.numel() == 0:
             continue
-        res = target.query(points[sel])
-        dist = dist.index_copy(0, sel, res.distance.to(points.dtype))
-        closest = closest.index_copy(0, sel, res.closest.to(points.dtype))
-        normal = normal.index_copy(0, sel, res.normal.to(points.dtype))
+        if exact:
+            res = target.query(points[sel])
+            d, c, n = res.distance, res.closest, res.normal
+        else:
+            d, c, n = target.approx_query(points[sel])
+        dist = dist.index_copy(0, sel, d.to(points.dtype))
+        closest = closest.index_copy(0, sel, c.to(points.dtype))
+        normal = normal.index_copy(0, sel, n.to(points.dtype))
     return dist, closest, normal
 
 
@@ -97,18 +104,21 @@ def contact_sphere_index(hand) -> torch.Tensor:
     return torch.stack(out)
 
 
-def hand_object_state(hand, targets, object_index, root_pose, joints, finger_index, tip_spheres) -> HandObjectState:
+def hand_object_state(hand, targets, object_index, root_pose, joints, finger_index, tip_spheres,
+                      exact_contacts: bool = True, sphere_margin: float = 0.0) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
-    ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices.
+    ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
+    picks the exact mesh SDF (default) or the SDF grid for the contacts. ``sphere_margin`` (m) is
+    how far collision spheres may sink into the object before they count as penetrating.
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
     tips = centres[:, tip_spheres]
-    d_c, closest, outward = _query_targets(targets, object_index, tips)
+    d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
     d_sph = _grid_distance(targets, object_index, centres)
-    pen = torch.relu(radii - d_sph)
+    pen = torch.relu(radii - sphere_margin - d_sph)
     lo, hi = hand.joint_lower, hand.joint_upper
     violation = (torch.relu(joints - hi) + torch.relu(lo - joints)).sum(-1)
     return HandObjectState(
@@ -120,7 +130,11 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, finger_ind
 
 
 def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) -> EnergyTerms:
-    """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``."""
+    """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
+
+    ``E_dist`` aims each contact sphere at a gap of ``-cfg.sphere_margin_m`` (sunk by the margin
+    the penetration term allows, since the spheres overshoot the hand's collision shapes).
+    """
     w = cfg.weights
     if w.task > 0:
         e_task = task_energy(
@@ -129,7 +143,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) 
         ) / directions.shape[0]
     else:
         e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])
-    e_dist = (state.tip_distance**2).sum(-1)
+    e_dist = ((state.tip_distance + cfg.sphere_margin_m) ** 2).sum(-1)
     total = (w.task * e_task + w.distance * e_dist + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
     return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total)
