@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from datagen.hands.model import quaternion_to_matrix as quat_to_matrix  # one implementation, in hands
+
 __all__ = ["axis_angle_to_quat", "quat_multiply", "matrix_to_quat", "quat_to_matrix"]
 
 
@@ -27,17 +29,6 @@ def quat_multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
         aw * by - ax * bz + ay * bw + az * bx,
         aw * bz + ax * by - ay * bx + az * bw,
     ], dim=-1)
-
-
-def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    """``(..., 4)`` quaternions (normalized here) -> ``(..., 3, 3)`` rotation matrices."""
-    q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(q.shape[:-1] + (3, 3))
 
 
 def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
