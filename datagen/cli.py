@@ -23,6 +23,9 @@ REGISTRARS: dict[str, str] = {
     "synth": "datagen.synth.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",
+    "run": "workers.cli:register_run",
+    "status": "workers.cli:register_status",
+    "report": "workers.cli:register_report",
 }
 
 

@@ -1,6 +1,8 @@
 """Versioned Arrow schemas for datagen's Parquet files, declared once in JSON.
 
-``grasps.json`` declares every column (type, shape, unit, frame, doc); :func:`arrow_schema`
+``grasps.json`` (synthesized rows), ``evaluated.json`` (a dataset shard: grasps + the MuJoCo
+evaluation columns, via ``extends``) and ``failures.json`` (a job's failed objects) declare
+every column (type, shape, unit, frame, doc); :func:`arrow_schema`
 builds the ``pyarrow.Schema`` from it (``nq`` = 7 + the hand's joint count), with the schema
 name and version in the metadata; :func:`check_version` refuses files of another version.
 """
@@ -32,13 +34,18 @@ def declaration(name: str = "grasps") -> dict:
 
 
 def columns(name: str = "grasps") -> list[dict]:
-    return declaration(name)["columns"]
+    """Columns of ``name``; a declaration with ``extends`` starts with its parent's columns."""
+    decl = declaration(name)
+    parent = columns(decl["extends"]) if decl.get("extends") else []
+    return parent + decl["columns"]
 
 
 def _arrow_type(col: dict, dims: dict[str, int]) -> pa.DataType:
     t = col["type"]
     if t == "list<string>":
         return pa.list_(pa.string())
+    if t == "list<bool>":
+        return pa.list_(pa.bool_())
     if t == "list<float32>":
         return pa.list_(pa.float32())
     if t == "list<float32[3]>":
@@ -56,7 +63,7 @@ def arrow_schema(name: str = "grasps", **dims: int) -> pa.Schema:
     decl = declaration(name)
     fields = [pa.field(c["name"], _arrow_type(c, dims), metadata={"doc": c["doc"], "unit": c.get("unit", ""),
                                                                    "frame": c.get("frame", "")})
-              for c in decl["columns"]]
+              for c in columns(name)]
     meta = {"datagen.schema": decl["name"], "datagen.schema_version": str(decl["version"])}
     return pa.schema(fields, metadata=meta)
 

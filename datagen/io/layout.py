@@ -1,0 +1,20 @@
+"""The on-disk layout of a job directory, as named constants (written by ``workers``, read here).
+
+    job.json                     the job's config, its hash, code and package versions
+    manifest.jsonl               the manifest slice of the job
+    shards/part-NNNNN.parquet    grasp rows of shard N (schema ``evaluated``)
+    failures/part-NNNNN.parquet  failed objects of shard N (schema ``failures``)
+    failures.parquet             all failures
+    objects/<entry>/             processed objects; rows' ``object_path`` is relative to the job dir
+    ledger/part-NNNNN.json       present once shard N is finished (its counts and timings)
+"""
+
+JOB_JSON = "job.json"
+MANIFEST = "manifest.jsonl"
+SHARDS_DIR = "shards"
+FAILURES_DIR = "failures"
+FAILURES = "failures.parquet"
+OBJECTS_DIR = "objects"
+LEDGER_DIR = "ledger"
+LOCK = ".lock"
+SHARD_NAME = "part-{index:05d}"

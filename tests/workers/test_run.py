@@ -1,0 +1,113 @@
+"""The Ray driver: a killed driver resumes without losing or duplicating rows, a lost worker node
+does not lose the job, a different config on the same directory is refused."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from workers.job import JobDir, JobError
+from workers.run import run_job
+
+from .conftest import comparable_rows, tiny_config
+from .test_shard import run_all
+
+pytestmark = pytest.mark.ray
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory, mesh_source, cache_dir):
+    """The rows of an uninterrupted run (shards run in this process, no Ray)."""
+    return comparable_rows(run_all(tmp_path_factory.mktemp("ref") / "job", tiny_config(mesh_source), cache_dir).path)
+
+
+def _wait_for(pred, timeout_s: float, what: str):
+    t0 = time.monotonic()
+    while not pred():
+        assert time.monotonic() - t0 < timeout_s, f"timed out waiting for {what}"
+        time.sleep(0.2)
+
+
+def test_sigkilled_driver_resumes_to_the_same_rows(tmp_path, mesh_source, cache_dir, reference):
+    cfg = tiny_config(mesh_source)
+    out = tmp_path / "job"
+    (tmp_path / "job.yaml").write_text(yaml.safe_dump(cfg.to_dict()))
+    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--config", str(tmp_path / "job.yaml"),
+           "--num-cpus", "1", "--cache", cache_dir, "--no-progress"]
+    proc = subprocess.Popen(cmd, cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        _wait_for(lambda: len(JobDir(out).finished()) >= 1 if (out / "ledger").is_dir() else False, 150,
+                  "the first finished shard")
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        try:  # the driver's local Ray processes share its session: end them too
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    done_before = set(JobDir(out).finished())
+    assert 1 <= len(done_before) < 3, f"kill came too late to test a resume ({done_before})"
+    status = run_job(cfg, out, num_cpus=2, cache=cache_dir, progress=False, log=lambda *a: None)
+    assert status["complete"] and status["shards_done"] == 3
+    rows = comparable_rows(out)
+    assert len({r["grasp_id"] for r in rows}) == len(rows)  # no duplicates
+    assert rows == reference  # none lost, same values
+    assert status["failures"] == {"process:" + status_reason(out): 1}
+
+
+def status_reason(out: Path) -> str:
+    import pyarrow.parquet as pq
+
+    (reason,) = pq.read_table(JobDir(out).failures_path)["reason"].to_pylist()
+    return reason
+
+
+def test_second_run_refuses_a_different_config(tmp_path, mesh_source, cache_dir):
+    out = tmp_path / "job"
+    JobDir(out).init(tiny_config(mesh_source))
+    with pytest.raises(JobError, match="different job"):
+        run_job(tiny_config(mesh_source, seed=3), out, num_cpus=1, cache=cache_dir, progress=False)
+
+
+def test_removed_worker_node_does_not_lose_rows(tmp_path, mesh_source, cache_dir, reference):
+    from ray.cluster_utils import Cluster
+
+    cfg = tiny_config(mesh_source)
+    out = tmp_path / "job"
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
+    try:
+        cluster.add_node(num_cpus=1)
+        doomed = cluster.add_node(num_cpus=1)
+        cluster.wait_for_nodes()
+        removed = threading.Event()
+
+        def remove_when_busy():
+            # objects are linked into the job dir once a shard is past processing: tasks are running
+            try:
+                _wait_for(lambda: (out / "objects").is_dir() and any((out / "objects").iterdir()), 120,
+                          "a running shard")
+            except AssertionError:
+                return
+            cluster.remove_node(doomed)
+            removed.set()
+
+        th = threading.Thread(target=remove_when_busy, daemon=True)
+        th.start()
+        status = run_job(cfg, out, address=cluster.address, cache=cache_dir, progress=False, log=lambda *a: None)
+        th.join(5)
+        assert removed.is_set()
+        assert status["complete"] and not status["shard_errors"]
+        assert comparable_rows(out) == reference
+    finally:
+        cluster.shutdown()

@@ -1,0 +1,252 @@
+"""The per-shard pipeline as a plain function: objects (cached, isolated) -> synthesis -> MuJoCo
+evaluation -> one Parquet shard. Ray calls `run_shard`; tests call it directly.
+
+Every object is processed in its own process with a time limit, so a crashing or hanging CoACD
+costs that object, not the shard. Anything that fails for an object (processing, its synthesis
+target, the batch's synthesis or evaluation) becomes a `failures` row with a stage and reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import multiprocessing as mp
+import os
+import shutil
+import socket
+import time
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from schemas import arrow_schema
+
+from .job import JobConfig, JobDir
+
+__all__ = ["run_shard", "process_isolated", "write_table_atomic", "shard_seed"]
+
+_HANDS: dict = {}  # hand name -> HandModel, reused by a Ray worker across shards
+
+
+def shard_seed(cfg: JobConfig, index: int) -> int:
+    """Synthesis seed of shard ``index`` (recorded in every row)."""
+    return int(cfg.seed) + int(index)
+
+
+def _process_child(conn, source, path, object_id, family, pcfg_dict, cache, sha) -> None:
+    from datagen.objects.config import ProcessConfig
+    from datagen.objects.process import process_object
+    from datagen.objects.sources import resolve
+
+    ref = resolve(source, path, object_id, family)
+    p = process_object(ref, ProcessConfig.from_dict(pcfg_dict), root=cache, expected_sha256=sha)
+    conn.send((p.status, p.reason, p.message, str(p.entry) if p.entry else ""))
+    conn.close()
+
+
+def process_isolated(entry, pcfg, cache: str | None, timeout_s: float):
+    """``(ProcessedObject or None, reason, message)``: the cached entry if present, else processed
+    in a fresh process killed after ``timeout_s`` (reason ``timeout``) or if it dies (``crashed``)."""
+    from datagen.objects.cache import cache_root, entry_dir
+    from datagen.objects.layout import META
+    from datagen.objects.process import load_processed
+
+    final = entry_dir(cache_root(cache), entry.sha256, pcfg.hash())
+    if (final / META).is_file():
+        p = load_processed(final)
+        return (p, "", "") if p.ok else (None, p.reason, p.message)
+    ctx = mp.get_context("spawn")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_process_child, args=(child, entry.source, entry.path, entry.id, entry.family,
+                                                    pcfg.to_dict(), str(cache_root(cache)), entry.sha256),
+                       daemon=True)
+    proc.start()
+    child.close()
+    try:
+        if not parent.poll(timeout_s):
+            return None, "timeout", f"{entry.id}: processing exceeded {timeout_s:g} s and was killed"
+        try:
+            status, reason, message, path = parent.recv()
+        except EOFError:
+            proc.join(5)
+            return None, "crashed", f"{entry.id}: the processing process died (exit code {proc.exitcode})"
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join(5)
+        parent.close()
+    if status != "ok":
+        return None, reason, message
+    return load_processed(Path(path)), "", ""
+
+
+def _link_into_job(processed, job: JobDir) -> str:
+    """Hard-link (or copy) a processed-object directory into the job; returns its path
+    relative to the job directory."""
+    rel = Path("objects") / processed.entry.name
+    dst = job.path / rel
+    if not (dst / "meta.json").is_file():
+        tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+
+        def link(src, d):
+            try:
+                os.link(src, d)
+            except OSError:
+                shutil.copy2(src, d)
+
+        shutil.copytree(processed.entry, tmp, copy_function=link)
+        try:
+            os.replace(tmp, dst)
+        except OSError:  # another attempt won the race
+            shutil.rmtree(tmp, ignore_errors=True)
+    return str(rel)
+
+
+def write_table_atomic(table: pa.Table, path: Path) -> None:
+    """Write Parquet to a temp name in the same directory and rename: the final name holds
+    either nothing or a complete file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.tmp")
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _failure(fails: list, shard: int, object_id: str, stage: str, reason: str, message: str,
+             scale: float = float("nan"), task: str = "") -> None:
+    fails.append({"object_id": object_id, "object_scale": scale, "task": task, "stage": stage,
+                  "reason": reason or "error", "message": message, "shard": shard})
+
+
+def _hand(name: str, device: str):
+    from datagen.hands import load_hand
+
+    key = (name, device)
+    if key not in _HANDS:
+        _HANDS[key] = load_hand(name, device=device)
+    return _HANDS[key]
+
+
+def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
+    """Run shard ``index`` over manifest ``entries`` (dicts of ManifestEntry fields) and write
+    its shard, failures and ledger entry. Returns the ledger summary. Idempotent: a rerun
+    overwrites the same files with the same rows."""
+    import torch
+
+    from datagen.objects.manifest import ManifestEntry
+    from datagen.objects.process import load_processed
+    from datagen.synth import GraspTarget, load_task, synthesize
+    from datagen.synth.rows import result_table
+    from datagen.eval.table import evaluate_table
+
+    t_start, cpu_start = time.perf_counter(), time.process_time()
+    job = JobDir(job_path)
+    cfg = JobConfig.from_dict(cfg_dict)
+    pcfg, scfg, ecfg = cfg.build_configs()
+    torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    cache = provenance.get("cache") or None
+    timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
+    fails: list[dict] = []
+    tables: list[pa.Table] = []
+
+    # 1. objects
+    t0 = time.perf_counter()
+    ready = []  # (ManifestEntry, processed object inside the job dir, relative path)
+    for d in entries:
+        e = ManifestEntry(**{**d, "scales": tuple(d["scales"])})
+        try:
+            p, reason, message = process_isolated(e, pcfg, cache, cfg.object_timeout_s)
+            if p is None:
+                _failure(fails, index, e.id, "process", reason, message)
+                continue
+            rel = _link_into_job(p, job)
+            ready.append((e, load_processed(job.path / rel), rel))
+        except Exception as exc:  # noqa: BLE001 - recorded, never fatal
+            _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
+    timings["process_s"] = time.perf_counter() - t0
+
+    # 2. synthesis targets
+    t0 = time.perf_counter()
+    targets = []
+    for e, p, rel in ready:
+        try:
+            # the SDF and its grid are in normalized units: build them once, rescale the hull samples
+            base = GraspTarget.from_processed(p, e.scales[0], grid_resolution=cfg.grid_resolution)
+        except Exception as exc:  # noqa: BLE001
+            _failure(fails, index, e.id, "target", "error", f"{e.id}: {type(exc).__name__}: {exc}")
+            continue
+        for s in e.scales:  # the manifest's scales (a built manifest has the config's)
+            t = dataclasses.replace(base, scale=float(s), hull_points=base.hull_points * (s / base.scale),
+                                    object_path=rel)
+            targets.append(t.to(device) if device != "cpu" else t)
+    timings["target_s"] = time.perf_counter() - t0
+
+    hand = _hand(cfg.hand, device) if targets else None
+    for task_name in cfg.tasks:
+        if not targets:
+            break
+        task = load_task(task_name)
+        # 3. synthesis, one batch for the shard
+        t0 = time.perf_counter()
+        try:
+            scfg_k = dataclasses.replace(scfg, seed=shard_seed(cfg, index))
+            result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object)
+            table = result_table(result, targets, hand, task, scfg_k)
+        except Exception as exc:  # noqa: BLE001
+            for t in targets:
+                _failure(fails, index, t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "
+                         f"{task.name}: {type(exc).__name__}: {exc}", t.scale, task.name)
+            timings["synth_s"] += time.perf_counter() - t0
+            continue
+        timings["synth_s"] += time.perf_counter() - t0
+        # 4. MuJoCo evaluation, per object so one bad object costs only its rows
+        t0 = time.perf_counter()
+        for t in targets:
+            mask = pc.and_(pc.equal(table["object_id"], t.object_id),
+                                   pc.equal(table["object_scale"], pa.scalar(t.scale, pa.float32())))
+            part = table.filter(mask)
+            try:
+                tables.append(evaluate_table(part, ecfg, base=job.path, workers=1))
+            except Exception as exc:  # noqa: BLE001
+                _failure(fails, index, t.object_id, "eval", "error", f"{t.object_id} at {t.scale} m, task "
+                         f"{task.name}: {type(exc).__name__}: {exc}", t.scale, task.name)
+        timings["eval_s"] += time.perf_counter() - t0
+
+    # 5. write: shard (if it has rows), failures, then the ledger entry
+    t0 = time.perf_counter()
+    nq = 7 + (hand.num_joints if hand is not None else _hand(cfg.hand, "cpu").num_joints)
+    joint_names = (hand or _hand(cfg.hand, "cpu")).joint_names
+    schema = arrow_schema("evaluated", nq=nq)
+    meta = dict(schema.metadata)
+    meta.update({k.encode(): (v if isinstance(v, str) else json.dumps(v, sort_keys=True)).encode() for k, v in {
+        "datagen.joint_names": joint_names, "datagen.code_version": provenance["code_version"],
+        "datagen.config_hash": cfg.hash(), "datagen.packages": provenance["packages"],
+        "datagen.host": socket.gethostname(), "datagen.job_created_at": provenance["created_at"],
+        "datagen.written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "datagen.shard": str(index), "datagen.synth_config": scfg.to_dict(), "datagen.eval_config": ecfg.to_dict(),
+        "datagen.process_config": pcfg.to_dict()}.items()})
+    schema = schema.with_metadata(meta)
+    if tables:
+        out = pa.concat_tables([tb.select(schema.names).cast(schema.remove_metadata()) for tb in tables])
+        out = out.replace_schema_metadata(meta)
+        write_table_atomic(out, job.shard_path(index))
+    else:  # no rows: no shard file (some readers, e.g. Hugging Face datasets, reject empty Parquet files)
+        out = schema.empty_table()
+        job.shard_path(index).unlink(missing_ok=True)
+    write_table_atomic(pa.Table.from_pylist(fails, schema=arrow_schema("failures")), job.shard_failures_path(index))
+    timings["write_s"] = time.perf_counter() - t0
+    n_ok = int(pc.sum(out["success"]).as_py() or 0) if out.num_rows else 0
+    summary = {"shard": index, "objects": len(entries), "objects_ok": len(ready), "grasps": out.num_rows,
+               "success": n_ok, "failures": len(fails), "host": socket.gethostname(), "device": device,
+               "timings": {k: round(v, 3) for k, v in timings.items()},
+               "wall_s": round(time.perf_counter() - t_start, 3),
+               "cpu_s": round(time.process_time() - cpu_start, 3)}  # this process (not the CoACD children)
+    job.record_finished(index, summary)
+    return summary
