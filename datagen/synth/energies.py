@@ -92,6 +92,12 @@ def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) ->
     return dist
 
 
+def _pair_overlap(hand, centres: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
+    """(B, P) overlap (m) of the self-collision sphere pairs, from already posed spheres."""
+    i, j = hand.self_collision_pairs[:, 0], hand.self_collision_pairs[:, 1]
+    return torch.relu(radii[i] + radii[j] - (centres[:, i] - centres[:, j]).norm(dim=-1))
+
+
 def contact_sphere_index(hand) -> torch.Tensor:
     """(F,) index of each fingertip's contact sphere: its link's sphere nearest the pad point."""
     out = []
@@ -114,6 +120,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, finger_ind
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
+    centres_all, radii_all = centres, radii
     tips = centres[:, tip_spheres]
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
@@ -124,7 +131,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, finger_ind
     return HandObjectState(
         tips=tips, tip_distance=d_tip, contact_points=closest, contact_normals=-outward,
         sphere_penetration=(pen * pen).sum(-1), max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
-        self_penetration=hand.self_penetration(root_pose, joints, transforms=T).square().sum(-1),
+        self_penetration=_pair_overlap(hand, centres_all, radii_all).square().sum(-1),
         joint_violation=violation,
     )
 
