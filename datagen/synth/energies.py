@@ -110,7 +110,7 @@ def contact_sphere_index(hand) -> torch.Tensor:
     return torch.stack(out)
 
 
-def hand_object_state(hand, targets, object_index, root_pose, joints, finger_index, tip_spheres,
+def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 

@@ -96,7 +96,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
     def energy_fn(t, q, j):
         jj = hand.apply_couplings(j)
-        state = hand_object_state(hand, targets, object_index, torch.cat([t, q], -1), jj, finger_index, tip_spheres,
+        state = hand_object_state(hand, targets, object_index, torch.cat([t, q], -1), jj, tip_spheres,
                                   exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m)
         terms = evaluate_state(state, cfg, task, directions)
         extras = {k: v.detach() for k, v in terms.as_dict().items()}
@@ -113,7 +113,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     with torch.no_grad():
         grasp_j = hand.apply_couplings(x.joints)
         root_f = x.root_pose()
-        state = hand_object_state(hand, targets, object_index, root_f, grasp_j, finger_index, tip_spheres,
+        state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m)
         opening = (hand.open_pose - grasp_j).clamp(-cfg.squeeze_rad, cfg.squeeze_rad)
         pre_j = hand.apply_couplings(grasp_j + opening)

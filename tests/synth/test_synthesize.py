@@ -62,8 +62,8 @@ def test_task_energy_decreases_from_the_initial_pose(hand, box, fc_run):
     dirs = torch.nn.functional.normalize(torch.randn(256, 6, generator=torch.Generator().manual_seed(0)), dim=-1)
     spheres = contact_sphere_index(hand)
     idx = list(range(5))
-    init = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.initial[:6, :7], res.initial[:6, 7:], idx, spheres)
-    final = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.grasp[:6, :7], res.grasp[:6, 7:], idx, spheres)
+    init = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.initial[:6, :7], res.initial[:6, 7:], spheres[idx])
+    final = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.grasp[:6, :7], res.grasp[:6, 7:], spheres[idx])
     e0, e1 = evaluate_state(init, cfg, task, dirs), evaluate_state(final, cfg, task, dirs)
     assert e1.task.mean() < e0.task.mean() - 0.05
     assert (e1.total < e0.total).all()
