@@ -49,20 +49,36 @@ class EnergyWeights:
 
 @dataclass(frozen=True)
 class InitConfig:
-    """Initial hand poses (see :mod:`datagen.synth.init`)."""
+    """Initial hand poses (see :mod:`datagen.synth.init`). Vectors are in the object frame."""
 
-    kind: str = "surround"  #: "surround" (palm faces the object from its hull) or "above" (palm down over it)
+    kind: str = "surround"  #: "surround" (palm faces the object from its hull), "above" or "approach"
     distance_m: tuple[float, float] = (0.03, 0.06)  #: palm distance from the convex hull, uniform range
     roll_deg: float = 180.0  #: jitter about the approach axis, +-
     tilt_deg: float = 15.0  #: jitter of the approach axis, +-
     offset_m: float = 0.01  #: lateral jitter of the palm origin, +-
+    approach: tuple[float, float, float] = (0.0, 0.0, -1.0)  #: "approach": palm approach direction ("above": -z)
+    thumb: tuple[float, float, float] | None = None  #: "approach": preferred thumb direction (None: random roll)
+    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm aims at, m
 
     def __post_init__(self):
-        if self.kind not in ("surround", "above"):
-            raise ConfigError(f"init.kind must be 'surround' or 'above', got {self.kind!r}")
+        if self.kind not in ("surround", "above", "approach"):
+            raise ConfigError(f"init.kind must be 'surround', 'above' or 'approach', got {self.kind!r}")
         lo, hi = self.distance_m
         if not 0 <= lo <= hi:
             raise ConfigError(f"init.distance_m must be an increasing pair >= 0, got {self.distance_m}")
+        for name in ("approach", "thumb", "target_m"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if len(v) != 3 or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in v):
+                raise ConfigError(f"init.{name} must be 3 finite numbers, got {v!r}")
+            if name != "target_m" and math.hypot(*v) < 1e-9:
+                raise ConfigError(f"init.{name} must be a non-zero direction, got {v!r}")
+        if self.thumb is not None:
+            a, t = self.approach, self.thumb
+            cos = abs(sum(x * y for x, y in zip(a, t))) / (math.hypot(*a) * math.hypot(*t))
+            if cos > 0.99:
+                raise ConfigError(f"init.thumb {t} is (nearly) parallel to init.approach {a}")
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,9 @@
 ``surround`` (force closure, NOTES §2): a random point of the object's convex hull, pushed out
 along the hull normal by ``distance_m``; the palm's approach axis points back along the normal
 (tilted by up to ``tilt_deg``), rolled by up to ``roll_deg`` about it, origin jittered
-laterally by up to ``offset_m``. ``above``: the palm over the object's top, facing down (-z).
+laterally by up to ``offset_m``. ``approach``: the palm faces along ``approach`` from the hull's
+supporting plane perpendicular to it, aimed at ``target_m``, thumb towards ``thumb`` (rolled by up
+to ``roll_deg``); ``above`` is ``approach`` with the palm down (-z) aimed at the origin.
 Joints start at the hand's open pose. Everything is drawn from the passed generator.
 """
 
@@ -66,10 +68,13 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
             idx = (rand(sel.numel()) * target.hull_points.shape[0]).long().clamp_max(target.hull_points.shape[0] - 1)
             origin[sel] = target.hull_points[idx].to(dev, dt)
             normal[sel] = target.hull_normals[idx].to(dev, dt)
-        else:  # above: over the top of the hull, palm down
-            top = target.hull_points[:, 2].max().to(dev, dt)
-            origin[sel] = torch.stack([torch.zeros_like(top), torch.zeros_like(top), top]).expand(sel.numel(), 3)
-            normal[sel] = torch.tensor([0, 0, 1.0], dtype=dt, device=dev).expand(sel.numel(), 3)
+        else:  # above / approach: palm on the hull's supporting plane facing -approach, aimed at target
+            a = -1.0 * torch.tensor(init_cfg.approach if init_cfg.kind == "approach" else (0, 0, -1.0), dtype=dt, device=dev)
+            n = _unit(a)
+            target_pt = torch.tensor(init_cfg.target_m if init_cfg.kind == "approach" else (0, 0, 0.0), dtype=dt, device=dev)
+            reach = ((target.hull_points.to(dev, dt) - target_pt) @ n).max()
+            origin[sel] = (target_pt + n * reach).expand(sel.numel(), 3)
+            normal[sel] = n.expand(sel.numel(), 3)
     lo, hi = init_cfg.distance_m
     dist = lo + (hi - lo) * rand(B)
     lateral = _any_perpendicular(normal)
@@ -78,7 +83,12 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
     approach = -normal
     tilt_axis = _rotate_about(_any_perpendicular(approach), approach, 2 * math.pi * rand(B))
     approach = _rotate_about(approach, tilt_axis, math.radians(init_cfg.tilt_deg) * (2 * rand(B) - 1))
-    thumb = _rotate_about(_any_perpendicular(approach), approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
+    if init_cfg.kind == "approach" and init_cfg.thumb is not None:
+        hint = torch.tensor(init_cfg.thumb, dtype=dt, device=dev).expand(B, 3)
+        base = _unit(hint - (hint * approach).sum(-1, keepdim=True) * approach)
+    else:
+        base = _any_perpendicular(approach)
+    thumb = _rotate_about(base, approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
     root = root_from_palm(hand, origin, approach, thumb)
     joints = hand.open_pose.expand(B, -1).clone()
     return root, joints

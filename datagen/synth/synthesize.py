@@ -70,13 +70,15 @@ def finger_joint_groups(hand) -> list[torch.Tensor]:
 
 
 def _resolve_fingers(hand, task: TaskSpec) -> list[int]:
+    """Indices of the task's contact fingertips. Names the hand lacks (``lf`` on four-finger
+    hands) are dropped; a task left with none of its fingertips is an error."""
     if task.fingers == "all":
         return list(range(len(hand.fingertip_names)))
-    missing = [f for f in task.fingers if f not in hand.fingertip_names]
-    if missing:
-        raise ValueError(f"task {task.name!r} names fingertips {missing} that hand {hand.name!r} lacks; "
-                         f"it has {hand.fingertip_names}")
-    return [hand.fingertip_names.index(f) for f in task.fingers]
+    present = [f for f in task.fingers if f in hand.fingertip_names]
+    if not present:
+        raise ValueError(f"task {task.name!r} names fingertips {list(task.fingers)}, none of which hand "
+                         f"{hand.name!r} has; it has {hand.fingertip_names}")
+    return [hand.fingertip_names.index(f) for f in present]
 
 
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,

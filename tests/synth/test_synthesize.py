@@ -98,6 +98,23 @@ def test_initial_palm_faces_the_object(hand, box):
     assert torch.equal(joints, hand.open_pose.expand(64, -1))
 
 
+def test_approach_init_places_the_palm_as_specified(hand, box):
+    # palm approaching along -x, thumb up (+z), aimed at a point off the box's centre: the box's
+    # face at x = +extent is the supporting plane, the palm origin sits 3-6 cm beyond it
+    init = TaskSpec.from_dict({"name": "t", "init": {
+        "kind": "approach", "approach": [-1, 0, 0], "thumb": [0, 0, 1], "target_m": [0, 0.01, -0.02],
+        "roll_deg": 0, "tilt_deg": 0, "offset_m": 0, "distance_m": [0.03, 0.06]}}).init
+    root, joints = initial_poses(hand, [box], torch.zeros(32, dtype=torch.long), init, torch.Generator().manual_seed(0))
+    palm = hand.palm_frame(root, joints)
+    face_x = 0.08 * box.sdf.vertices[:, 0].max()
+    assert torch.allclose(palm.approach, torch.tensor([-1.0, 0, 0]).expand(32, 3), atol=1e-5)
+    thumb = torch.nn.functional.normalize(palm.thumb - (palm.thumb * palm.approach).sum(-1, keepdim=True) * palm.approach, dim=-1)
+    assert torch.allclose(thumb, torch.tensor([0, 0, 1.0]).expand(32, 3), atol=1e-5)
+    gap = palm.origin[:, 0] - face_x
+    assert (gap >= 0.03 - 1e-5).all() and (gap <= 0.06 + 1e-5).all() and gap.std() > 0.005
+    assert torch.allclose(palm.origin[:, 1:], torch.tensor([0.01, -0.02]).expand(32, 2), atol=1e-5)
+
+
 def test_quaternions_match_mujoco():
     rng = np.random.default_rng(0)
     q = rng.normal(size=(20, 4))
@@ -152,4 +169,9 @@ def test_bad_tasks_are_named(tmp_path, hand, box):
     with pytest.raises(ConfigError, match="w_t"):
         load_task(bad)
     with pytest.raises(ValueError, match="fingertips"):
-        synthesize(hand, [box], TaskSpec(name="t", fingers=("th", "pinky")), SynthConfig(iters=1), 1)
+        synthesize(hand, [box], TaskSpec(name="t", fingers=("pinky",)), SynthConfig(iters=1), 1)
+    # a fingertip the hand lacks (lf on four-finger hands) is dropped, the others stay
+    res = synthesize(hand, [box], TaskSpec(name="t", fingers=("th", "pinky")), SynthConfig(iters=1), 1)
+    assert res.fingers == ["th"]
+    with pytest.raises(ConfigError, match="thumb"):
+        TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "approach": [1, 0, 0], "thumb": [2, 0, 0]}})
