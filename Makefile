@@ -74,3 +74,10 @@ dataset: $(STAMP)
 
 bench-pipeline: $(STAMP)
 	$(PY) -m benchmarks.bench_pipeline
+
+# Task-oriented benchmark (issue 8): paper Table II + hyper-parameter rows -> benchmarks/results/tasks.md.
+# Resumable (records in .cache/bench_tasks); e.g. BENCH_TASKS_ARGS="--tasks turn_knob2 --variants full --num 20"
+.PHONY: bench-tasks
+BENCH_TASKS_ARGS ?=
+bench-tasks: $(STAMP)
+	$(PY) -m benchmarks.bench_tasks $(BENCH_TASKS_ARGS)

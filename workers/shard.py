@@ -133,6 +133,17 @@ def _hand(name: str, device: str):
     return _HANDS[key]
 
 
+def task_targets(task, targets: list) -> list:
+    """The targets a task runs on: a task whose YAML names its object (``eval.object``, the
+    task-benchmark tasks) only that object (``task-<name>`` of the ``tasks`` source), other
+    tasks every target."""
+    from datagen.eval.tasks import task_object
+    from datagen.objects.task_objects import object_id
+
+    name = task_object(task)
+    return list(targets) if name is None else [t for t in targets if t.object_id == object_id(name)]
+
+
 def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     """Run shard ``index`` over manifest ``entries`` (dicts of ManifestEntry fields) and write
     its shard, failures and ledger entry. Returns the ledger summary. Idempotent: a rerun
@@ -189,10 +200,12 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
     timings["target_s"] = time.perf_counter() - t0
 
     hand = _hand(cfg.hand, device) if targets else None
+    all_targets = targets
     for task_name in cfg.tasks:
-        if not targets:
-            break
         task = load_task(task_name)
+        targets = task_targets(task, all_targets)
+        if not targets:
+            continue
         # 3. synthesis, one batch for the shard
         t0 = time.perf_counter()
         try:

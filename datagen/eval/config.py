@@ -58,10 +58,12 @@ class TaskTest:
 
     The disturbance is ``-w_t`` (unit 6-D [force, torque] after normalization): its force part
     is scaled by ``force_n`` newtons (None: ``EvalConfig.force_per_kg * object mass``), its
-    torque part by that force times ``torque_arm`` object scales (a torque of F * arm * scale
-    N m). The object moves on ``joint``: ``free`` (6 DoF), ``hinge`` (revolute about ``axis``
-    through ``anchor``) or ``slide`` (prismatic along ``axis``); ``anchor`` is in metres.
-    Success: the object stays within ``EvalConfig.max_translation_m`` / ``max_rotation_deg``.
+    torque part by ``torque_nm`` N m, or if that is None by the force times ``torque_arm``
+    object scales (a torque of F * arm * scale N m). The object moves on ``joint``: ``free``
+    (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor``) or ``slide`` (prismatic
+    along ``axis``); ``anchor`` is in metres. Success: the object stays within
+    ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s); ``min_touching_links``
+    (None: the config's) overrides the no-contact rule (a one-finger press touches one link).
     """
 
     w_t: tuple[float, float, float, float, float, float]
@@ -70,6 +72,10 @@ class TaskTest:
     anchor: tuple[float, float, float] = (0.0, 0.0, 0.0)
     force_n: float | None = None
     torque_arm: float = 1.0
+    torque_nm: float | None = None
+    max_translation_m: float | None = None
+    max_rotation_deg: float | None = None
+    min_touching_links: int | None = None
 
     def __post_init__(self) -> None:
         w = tuple(float(x) for x in self.w_t)
@@ -84,6 +90,11 @@ class TaskTest:
         object.__setattr__(self, "anchor", a)
         _check(self.force_n is None or self.force_n > 0, "TaskTest.force_n", "must be > 0 or null")
         _check(self.torque_arm >= 0, "TaskTest.torque_arm", "must be >= 0")
+        for name in ("torque_nm", "max_translation_m", "max_rotation_deg"):
+            v = getattr(self, name)
+            _check(v is None or (isinstance(v, (int, float)) and v > 0), f"TaskTest.{name}", f"must be > 0 or null, got {v!r}")
+        _check(self.min_touching_links is None or (isinstance(self.min_touching_links, int) and self.min_touching_links >= 0),
+               "TaskTest.min_touching_links", f"must be an int >= 0 or null, got {self.min_touching_links!r}")
 
     def disturbance(self, object_mass_kg: float, object_scale_m: float, force_per_kg: float):
         """(6,) disturbance wrench [force N, torque N m] applied at the object's centre of mass."""
@@ -92,17 +103,16 @@ class TaskTest:
         w = -np.asarray(self.w_t, dtype=np.float64)
         w /= np.linalg.norm(w)
         f = self.force_n if self.force_n is not None else force_per_kg * object_mass_kg
-        return np.concatenate([w[:3] * f, w[3:] * f * self.torque_arm * object_scale_m])
+        tau = self.torque_nm if self.torque_nm is not None else f * self.torque_arm * object_scale_m
+        return np.concatenate([w[:3] * f, w[3:] * tau])
 
 
-# Object-frame conventions of the built-in tasks (the synthesis must use the same frame): the
-# knob/handle axis is the object's z axis through its origin; buttons are pressed along -z;
-# drawers are pulled along +x; lifting is along +z.
+# Generic tests for any object (a knob turned about the object's z axis through its origin;
+# lifting along +z). The benchmark's ten tasks (turn_handle, push_button, pull_drawer, ...) are
+# not here: their tests come from their task YAMLs (`datagen.eval.tasks`), which `task_test`
+# consults for any name not in `hold_tasks` or `tasks`.
 DEFAULT_TASKS: dict[str, TaskTest] = {
     "turn_knob": TaskTest(w_t=(0, 0, 0, 0, 0, 1), joint="hinge", axis=(0, 0, 1)),
-    "turn_handle": TaskTest(w_t=(0, 0, 0, 0, 0, 1), joint="hinge", axis=(0, 0, 1)),
-    "push_button": TaskTest(w_t=(0, 0, -1, 0, 0, 0), joint="slide", axis=(0, 0, 1)),
-    "pull_drawer": TaskTest(w_t=(1, 0, 0, 0, 0, 0), joint="slide", axis=(1, 0, 0)),
     "lift": TaskTest(w_t=(0, 0, 1, 0, 0, 0), joint="free"),
 }
 
@@ -197,14 +207,21 @@ class EvalConfig:
         return self.hold_steps * self.timestep_s
 
     def task_test(self, task: str) -> TaskTest | None:
-        """None for a six-direction task, else its `TaskTest`; unknown tasks raise `EvalError`."""
+        """None for a six-direction task, else its `TaskTest`; unknown tasks raise `EvalError`.
+
+        Looked up in ``hold_tasks``, then ``tasks``, then the built-in task YAMLs' ``eval`` block
+        (`datagen.eval.tasks.builtin_task_test`)."""
         if task in self.hold_tasks:
             return None
-        if task not in self.tasks:
-            raise EvalError(f"task {task!r}", "has no evaluation test",
-                            f"known: {sorted(self.hold_tasks) + sorted(self.tasks)}; "
-                            "add it under `tasks` in the config")
-        return self.tasks[task]
+        if task in self.tasks:
+            return self.tasks[task]
+        from .tasks import builtin_task_test, has_builtin_test
+
+        if has_builtin_test(task):
+            return builtin_task_test(task)
+        raise EvalError(f"task {task!r}", "has no evaluation test",
+                        f"known: {sorted(self.hold_tasks) + sorted(self.tasks)} and the built-in task YAMLs; "
+                        "add it under `tasks` in the config")
 
     # ------------------------------------------------------------------ YAML
     @classmethod

@@ -94,6 +94,7 @@ class Evaluator:
         self.hand = hand
         self.cfg = cfg or EvalConfig()
         self._scenes: OrderedDict = OrderedDict()
+        self._hold_cfgs: dict = {}
         self._cache_size = cache_size
         self._pool = ThreadPoolExecutor(self.cfg.threads) if self.cfg.threads > 1 else None
         self._search = EpsilonSearch(num_samples=self.cfg.epsilon_samples,
@@ -124,6 +125,17 @@ class Evaluator:
         while len(self._scenes) > self._cache_size:
             self._scenes.popitem(last=False)
         return scene, datas
+
+    def _hold_config(self, test: TaskTest | None) -> EvalConfig:
+        """The config with a task test's own pass thresholds (cached per test)."""
+        if test is None or (test.max_translation_m is None and test.max_rotation_deg is None):
+            return self.cfg
+        key = (test.max_translation_m, test.max_rotation_deg)
+        if key not in self._hold_cfgs:
+            self._hold_cfgs[key] = dataclasses.replace(
+                self.cfg, max_translation_m=test.max_translation_m or self.cfg.max_translation_m,
+                max_rotation_deg=test.max_rotation_deg or self.cfg.max_rotation_deg)
+        return self._hold_cfgs[key]
 
     # ------------------------------------------------------------------ one grasp
     def epsilon(self, metrics: StaticMetrics) -> float:
@@ -192,7 +204,8 @@ class Evaluator:
         common = dict(pre=pre, met=met, eps=eps)
         if pre > cfg.max_pregrasp_penetration_m:
             return result(Reason.PENETRATION.value, **common)
-        if met.touching_links < cfg.min_touching_links:
+        min_links = cfg.min_touching_links if test is None or test.min_touching_links is None else test.min_touching_links
+        if met.touching_links < min_links:
             return result(Reason.NO_CONTACT.value, **common)
         if cfg.filter_max_penetration_m is not None and met.penetration > cfg.filter_max_penetration_m:
             return result(Reason.GRASP_PENETRATION.value, **common)
@@ -216,7 +229,7 @@ class Evaluator:
             wrenches = np.array([[*(f * np.asarray(d)), 0.0, 0.0, 0.0] for d in DIRECTIONS])
         else:
             wrenches = test.disturbance(mass, pieces.scale, cfg.force_per_kg)[None]
-        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, cfg, self._pool)
+        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, self._hold_config(test), self._pool)
         steps = n0 + sum(int(round(d.time / cfg.timestep_s)) - n0 for d in datas[:len(wrenches)])
         failed = [i for i, d in enumerate(dirs) if d.success is False]
         if not failed:

@@ -13,7 +13,7 @@ def register_manifest(sub: argparse._SubParsersAction) -> None:
     msub = p.add_subparsers(dest="manifest_command", required=True)
     b = msub.add_parser("build", help="enumerate a source into a manifest (JSONL)")
     b.add_argument("--source", default="procedural",
-                   help="procedural[:SEED] | dexgraspnet:PATH | dir:PATH | pybullet")
+                   help="procedural[:SEED] | tasks | dexgraspnet:PATH | dir:PATH | pybullet")
     b.add_argument("--count", type=int, default=None, help="number of objects (all files if omitted)")
     b.add_argument("--out", required=True, help="output manifest, e.g. manifests/NAME.jsonl")
     b.add_argument("--scales", type=float, nargs="+", default=None, help="object scales (metres)")

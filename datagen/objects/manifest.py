@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Iterable
 
 from .errors import ManifestError, MeshProcessingError, Reason, SourceError
+from . import task_objects
 from .sources import ObjectRef, iter_source, resolve
 
 __all__ = ["DEFAULT_SCALES", "ManifestEntry", "split_of", "build_manifest", "write_manifest",
@@ -64,7 +65,8 @@ def split_of(object_id: str, test_fraction: float = 0.1) -> str:
 def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEFAULT_SCALES,
                    test_fraction: float = 0.1, progress: bool = False) -> list[ManifestEntry]:
     """Enumerate a source and hash each raw mesh. Objects whose file cannot be read are skipped
-    with a warning on stderr (processing records every other failure)."""
+    with a warning on stderr (processing records every other failure). Objects of the ``tasks``
+    source get their own scale instead of ``scales`` (see `task_objects`)."""
     scales = tuple(float(s) for s in scales)
     if not scales or min(scales) <= 0:
         raise ValueError(f"manifest scales must be positive metres, got {scales}")
@@ -81,7 +83,9 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
         except MeshProcessingError as exc:
             print(f"warning: skipped {exc}", flush=True)
             continue
-        out.append(ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, scales,
+        # a task object has one scale, its own: its virtual joint's anchor is in metres at it
+        sc = (task_objects.build(ref.path).scale_m,) if ref.source == "tasks" else scales
+        out.append(ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, sc,
                                  split_of(ref.object_id, test_fraction)))
     return out
 

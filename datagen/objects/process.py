@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import layout
+from . import layout, task_objects
 from .cache import atomic_entry, cache_root, entry_dir
 from .coacd_step import decompose, pieces_from_meshes
 from .config import PROCESS_VERSION, ProcessConfig
@@ -117,7 +117,10 @@ def _build(ref: ObjectRef, raw: bytes, cfg: ProcessConfig, tmp: Path, meta: dict
     (tmp / layout.NORMALIZED).write_bytes(obj_bytes(mesh.vertices, mesh.faces, thing))
     t0 = lap("normalize", t0)
     existing = ref.piece_files()
-    if existing:  # DexGraspNet pieces: same normalization as their decomposed.obj
+    if ref.source == "tasks":  # exact convex parts of a task object, in its (centred) raw frame
+        parts = [((np.asarray(v) - centre) * factor, f) for v, f in task_objects.build(ref.path).parts]
+        pieces, meta["pieces_origin"] = pieces_from_meshes(parts, cfg, thing), "builder"
+    elif existing:  # DexGraspNet pieces: same normalization as their decomposed.obj
         parts = []
         for p in existing:
             m = load_mesh_bytes(p.read_bytes(), "obj", f"{thing}/{p.name}")

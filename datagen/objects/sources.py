@@ -9,6 +9,9 @@ Source URIs (the ``--source`` argument and the manifest's ``source`` field):
 - ``dir:ROOT``: every obj/stl/ply/off/glb file under ROOT (recursive, sorted); the path is the
   file's path relative to ROOT.
 - ``pybullet``: pybullet_data/random_urdfs/<n>/<n>.obj (needs the optional pybullet package).
+- ``tasks``: the ten task-benchmark objects (``task_objects.py``); the path is the object name,
+  e.g. ``"knob3"``, the id ``task-<name>``. Their convex parts are exact (no CoACD) and a built
+  manifest gives each its own scale (its joint anchor is in metres at that scale).
 
 Paths are always relative to the source root; ``resolve`` rejects any that escapes it.
 """
@@ -20,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from . import procedural
+from . import procedural, task_objects
 from .errors import ManifestError, MeshProcessingError, Reason, SourceError
 from .mesh_ops import MESH_EXTENSIONS
 
@@ -47,6 +50,8 @@ class ObjectRef:
 
     def read_bytes(self) -> bytes:
         """The raw mesh bytes; MeshProcessingError(missing_file) if the file is gone."""
+        if self.source == "tasks":
+            return task_objects.obj_bytes(self.path)
         if self.file is None:
             seed, index = _procedural_seed(self.source), int(self.path)
             return procedural.generate(seed, index).obj_bytes
@@ -76,8 +81,10 @@ def canonical_source(uri: str) -> str:
         return f"{kind}:{Path(arg).expanduser().resolve()}"
     if kind == "pybullet":
         return f"dir:{_pybullet_root()}"
+    if kind == "tasks" and not arg:
+        return "tasks"
     raise SourceError(Reason.UNKNOWN_SOURCE, uri,
-                      "use procedural[:SEED], dexgraspnet:PATH, dir:PATH or pybullet")
+                      "use procedural[:SEED], dexgraspnet:PATH, dir:PATH, pybullet or tasks")
 
 
 def _procedural_seed(uri: str) -> int:
@@ -91,7 +98,7 @@ def _procedural_seed(uri: str) -> int:
 
 def _root(source: str) -> Path | None:
     kind, _, arg = source.partition(":")
-    return None if kind == "procedural" else Path(arg)
+    return None if kind in ("procedural", "tasks") else Path(arg)
 
 
 def _pybullet_root() -> Path:
@@ -121,6 +128,10 @@ def iter_source(uri: str, count: int | None = None) -> Iterator[ObjectRef]:
             yield ObjectRef(procedural.object_id(seed, i), source, str(i), "obj",
                             procedural.family_of(seed, i))
         return
+    if kind == "tasks":
+        for name in task_objects.TASK_OBJECTS[:count]:
+            yield ObjectRef(task_objects.object_id(name), source, name, "obj", name)
+        return
     root = Path(arg)
     if not root.is_dir():
         raise SourceError(Reason.UNKNOWN_SOURCE, uri, f"source folder {root} does not exist")
@@ -144,6 +155,11 @@ def resolve(source: str, path: str, object_id: str, family: str = "") -> ObjectR
     leaves the source root (absolute, '..', or a symlink pointing out)."""
     source = canonical_source(source)
     root = _root(source)
+    if source == "tasks":
+        if path not in task_objects.TASK_OBJECTS:
+            raise ManifestError(Reason.SCHEMA, object_id, f"unknown task object {path!r}; known: "
+                                f"{list(task_objects.TASK_OBJECTS)}")
+        return ObjectRef(object_id, source, path, "obj", family)
     if root is None:
         if not path.isdigit():
             raise ManifestError(Reason.SCHEMA, object_id, f"procedural path must be an index, got {path!r}")

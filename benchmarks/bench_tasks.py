@@ -1,0 +1,323 @@
+"""Task-oriented benchmark (paper §V-B, Tables II and its hyper-parameter table).
+
+Per task (the ten built-in task YAMLs and their objects from `datagen.objects.task_objects`):
+``--num`` poses x ``--iters`` iterations with each variant, every pose evaluated in MuJoCo by
+the task's own test (``eval`` block of its YAML: the disturbance -w_t on the object's virtual
+joint, or the six-direction hold test for precision grasps). Variants:
+
+- ``baseline``: no task energy (weight 0); ``l2``: L2 task energy; ``nocpn``: no contact
+  position normalization; ``full``: the method (delta 15 deg, K = 1e2) -- Table II;
+- ``d0_k1e2``, ``d15_k1e4``, ``d0_k1e4``: the hyper-parameter rows (delta, K).
+
+Each (hand, variant, task, num, iters) run is stored as a JSON record under ``--records``
+(resumable: existing records are reused unless ``--force``); the report
+``benchmarks/results/tasks.md`` is rendered from every record there, so partial runs
+(``--tasks``, ``--variants``, ``--hands``, ``--num``) add up. Time = synthesis wall time; memory
+= peak RSS above the process's RSS before that synthesis (sampled every 20 ms).
+Usage: ``make bench-tasks`` (``BENCH_TASKS_ARGS=...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import json
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+RESULTS = Path(__file__).parent / "results" / "tasks.md"
+RECORDS = Path(__file__).parent.parent / ".cache" / "bench_tasks"  # raw records (git-ignored)
+
+TASKS = ("turn_handle", "turn_knob2", "turn_knob3", "lift_handbag", "lift_plate", "push_button", "pull_drawer",
+         "precision_lid", "precision_key", "precision_usba")
+COLUMNS = ("Handle", "Knob2", "Knob3", "Handbag", "Plate", "Button", "Drawer", "Lid", "Key", "USBA")
+# Paper Table II (Shadow hand, Isaac Gym), per task in TASKS order, and the average.
+PAPER = {"baseline": ([13, 39, 44, 0, 25, 40, 10, 38, 27, 2], 23.8),
+         "l2": ([84, 60, 64, 10, 80, 91, 48, 97, 68, 62], 66.4),
+         "nocpn": ([79, 64, 72, 50, 24, 96, 99, 86, 19, 2], 59.1),
+         "full": ([75, 73, 58, 51, 97, 97, 99, 74, 62, 40], 72.6)}
+# Paper hyper-parameter table: success %, time s, memory GB (RTX 3090).
+PAPER_HYPER = {"full": (72.6, 14.9, 1.5), "d15_k1e4": (75.1, 83.5, 15.3), "d0_k1e2": (72.1, 14.5, 1.5),
+               "d0_k1e4": (74.8, 83.4, 15.3)}
+VARIANTS = {  # name -> (label, SynthConfig overrides)
+    "baseline": ("Baseline (E_t weight 0)", {"weights": {"task": 0.0}}),
+    "l2": ("Ablation1: L2 task energy", {"task_energy_kind": "l2"}),
+    "nocpn": ("Ablation2: no CPN", {"normalize": False}),
+    "full": ("Ours (cos, CPN, delta 15, K 1e2)", {}),
+    "d0_k1e2": ("Ablation4: delta 0, K 1e2", {"delta_deg": 0.0}),
+    "d15_k1e4": ("Ablation3: delta 15, K 1e4", {"num_directions": 10_000}),
+    "d0_k1e4": ("Ablation5: delta 0, K 1e4", {"delta_deg": 0.0, "num_directions": 10_000}),
+}
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+class PeakRSS:
+    """Context manager: ``peak_mb`` = the highest RSS seen above the RSS at entry (20 ms sampling)."""
+
+    def __enter__(self):
+        self.base, self.peak, self._stop = _rss_mb(), 0.0, threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+        self._t.start()
+        return self
+
+    def _run(self):
+        while not self._stop.wait(0.02):
+            self.peak = max(self.peak, _rss_mb())
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._t.join()
+        self.peak = max(self.peak, _rss_mb())
+        self.peak_mb = self.peak - self.base
+
+
+def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool):
+    from datagen.synth import SynthConfig
+
+    d = dict(VARIANTS[variant][1], iters=iters, seed=seed)
+    w = dict(d.pop("weights", {}))
+    if no_self_pen:
+        w["self_penetration"] = 0.0
+    if w:
+        d["weights"] = w
+    return SynthConfig.from_dict(d)
+
+
+class Objects:
+    """Processed task objects and their synthesis targets, built once per process."""
+
+    def __init__(self):
+        self._cache = {}
+
+    def get(self, name: str):
+        if name not in self._cache:
+            from datagen.eval.scene import pieces_from_processed
+            from datagen.objects import task_objects
+            from datagen.objects.process import process_object
+            from datagen.objects.sources import iter_source
+            from datagen.synth import GraspTarget
+
+            ref = next(r for r in iter_source("tasks") if r.path == name)
+            p = process_object(ref)
+            if not p.ok:
+                raise RuntimeError(f"task object {name}: {p.reason}: {p.message}")
+            scale = task_objects.build(name).scale_m
+            self._cache[name] = (GraspTarget.from_processed(p, scale), pieces_from_processed(p, scale))
+        return self._cache[name]
+
+
+def code_version() -> str:
+    """``git describe --always --dirty`` of this checkout, or $DATAGEN_CODE_VERSION (e.g. in an export)."""
+    import subprocess
+
+    if os.environ.get("DATAGEN_CODE_VERSION"):
+        return os.environ["DATAGEN_CODE_VERSION"]
+    try:
+        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=Path(__file__).parent, text=True,
+                              capture_output=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects: Objects, seed: int,
+               no_self_pen: bool) -> dict:
+    """Synthesize ``num`` poses of one task with one variant and evaluate each; a JSON-able record."""
+    from datagen.eval import EvalConfig, Evaluator
+    from datagen.eval.tasks import task_object
+    from datagen.synth import load_task, synthesize
+
+    task = load_task(task_name)
+    target, pieces = objects.get(task_object(task))
+    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen)
+    with PeakRSS() as mem:
+        t0 = time.perf_counter()
+        res = synthesize(hand, [target], task, cfg, num)
+        synth_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    reasons, success = [], []
+    with Evaluator(hand, EvalConfig()) as ev:
+        for b in range(num):
+            poses = torch.stack([res.pregrasp[b], res.grasp[b], res.squeeze[b]]).double().numpy()
+            r = ev.evaluate(pieces, poses, task=task_name, w_t=task.w_t)
+            reasons.append(r.reason)
+            success.append(bool(r.success))
+    eval_s = time.perf_counter() - t0
+    usable = res.usable(cfg.contact_threshold_m)
+    return {"hand": hand.name, "task": task_name, "variant": variant, "num": num, "iters": iters, "seed": seed,
+            "no_self_penetration": no_self_pen, "fingers": res.fingers,
+            "success": float(np.mean(success)), "reasons": dict(collections.Counter(reasons)),
+            "synth_s": synth_s, "eval_s": eval_s, "peak_mb": mem.peak_mb,
+            "tips_in_contact": float(usable.float().mean()),
+            "max_penetration_mm_median": float(res.max_penetration.median()) * 1e3,
+            "code_version": code_version(), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def record_path(records: Path, hand: str, variant: str, task: str, num: int, iters: int) -> Path:
+    return records / f"{hand}__{variant}__{task}__n{num}__i{iters}.json"
+
+
+# ----------------------------------------------------------------------------- report
+def _load(records: Path) -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted(records.glob("*.json"))]
+
+
+def _pick(recs, hand, variant, task):
+    """The record with the most poses (then iterations) for (hand, variant, task)."""
+    c = [r for r in recs if (r["hand"], r["variant"], r["task"]) == (hand, variant, task)]
+    return max(c, key=lambda r: (r["num"], r["iters"])) if c else None
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.0f}"
+
+
+def task_definitions() -> list[str]:
+    """The tasks as their YAMLs and objects define them (one row per task)."""
+    from datagen.eval import EvalConfig
+    from datagen.eval.tasks import task_object
+    from datagen.objects import task_objects
+    from datagen.synth import load_task
+
+    cfg = EvalConfig()
+    out = ["## Tasks (from `datagen/synth/tasks/*.yaml` and `datagen/objects/task_objects.py`)", "",
+           "| task | object (scale m) | joint | w_t | gamma | fingers | init approach / aim (m) | test: disturbance, pass |",
+           "|---|---|---|---|---|---|---|---|"]
+    for t in TASKS:
+        spec = load_task(t)
+        obj = task_objects.build(task_object(spec))
+        test = cfg.task_test(t)
+        if test is None:
+            dist = f"six directions, {cfg.force_per_kg * cfg.object_mass_kg:g} N; < {cfg.max_translation_m * 100:g} cm, < {cfg.max_rotation_deg:g} deg"
+        else:
+            w = test.disturbance(cfg.object_mass_kg, obj.scale_m, cfg.force_per_kg)
+            tr = test.max_translation_m or cfg.max_translation_m
+            rot = test.max_rotation_deg or cfg.max_rotation_deg
+            dist = f"[{', '.join(f'{x:g}' for x in np.round(w, 4) + 0.0)}] N, N m; < {tr * 100:g} cm, < {rot:g} deg"
+        j = obj.joint
+        joint = j.kind if j.kind == "free" else f"{j.kind} {list(j.axis)} @ {list(j.anchor_m)}"
+        out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
+                   f"{', '.join(spec.fingers)} | {list(spec.init.approach)} / {list(spec.init.target_m)} | {dist} |")
+    return out
+
+
+def render(records: Path, machine: str) -> str:
+    recs = _load(records)
+    hands = sorted({r["hand"] for r in recs}, key=lambda h: (h != "shadow", h))
+    lines = ["# Task-oriented benchmark (paper Table II and its hyper-parameter table)", "",
+             f"Machine: {machine}", "",
+             "Ten tasks on procedural objects with virtual joints (`datagen/objects/task_objects.py`), task specs "
+             "`datagen/synth/tasks/<task>.yaml` (TWS, fingers, initial pose, and the `eval` block each task's test "
+             "comes from). Success = MuJoCo task test: the disturbance -w_t (magnitudes per task in its YAML) on the "
+             "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
+             "six-direction hold test (1 N, 5 cm / 15 deg). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
+             "Each cell: success % (poses x iterations of that cell in the size table below).", ""]
+    lines += task_definitions() + [""]
+    for hand in hands:
+        lines += [f"## Table II: {hand}", "",
+                  "| variant | " + " | ".join(COLUMNS) + " | average | paper average |",
+                  "|---|" + "---|" * (len(COLUMNS) + 2)]
+        for v in ("baseline", "l2", "nocpn", "full"):
+            cells = [_pick(recs, hand, v, t) for t in TASKS]
+            if not any(cells):
+                continue
+            got = [c["success"] for c in cells if c]
+            avg = f"{100 * np.mean(got):.1f}" + ("" if len(got) == len(TASKS) else f" ({len(got)} tasks)")
+            lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_pct(c and c["success"]) for c in cells)
+                         + f" | {avg} | {PAPER[v][1] if hand == 'shadow' else '-'} |")
+            if hand == "shadow":
+                lines.append(f"| paper {v} | " + " | ".join(str(x) for x in PAPER[v][0]) + f" | {PAPER[v][1]} | |")
+        lines.append("")
+        hyper = [v for v in ("full", "d15_k1e4", "d0_k1e2", "d0_k1e4") if any(_pick(recs, hand, v, t) for t in TASKS)]
+        if hyper:
+            lines += [f"## Hyper-parameters: {hand}", "",
+                      "| variant | delta | K | poses x iters | success % (tasks) | synthesis s per task (median) "
+                      "| peak memory MB (max) | paper SS / t / M |", "|---|---|---|---|---|---|---|---|"]
+            for v in hyper:
+                cells = [c for c in (_pick(recs, hand, v, t) for t in TASKS) if c]
+                cfg = dict(VARIANTS[v][1])
+                sizes = sorted({f"{c['num']}x{c['iters']}" for c in cells})
+                paper = PAPER_HYPER[v]
+                lines.append(f"| {VARIANTS[v][0]} | {cfg.get('delta_deg', 15.0):g} | {cfg.get('num_directions', 100):.0e} | "
+                             f"{', '.join(sizes)} | {100 * np.mean([c['success'] for c in cells]):.1f} ({len(cells)}) | "
+                             f"{np.median([c['synth_s'] for c in cells]):.1f} | {max(c['peak_mb'] for c in cells):.0f} | "
+                             f"{paper[0]} / {paper[1]} s / {paper[2]} GB |")
+            lines.append("")
+        lines += [f"## Runs and failure reasons: {hand}", "",
+                  "| task | variant | poses x iters | success % | synthesis s | eval s | peak MB | tips in contact % | "
+                  "median max penetration mm | code | reasons |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for t in TASKS:
+            for v in VARIANTS:
+                c = _pick(recs, hand, v, t)
+                if c:
+                    why = ", ".join(f"{k} {n}" for k, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]))
+                    note = " (no self-pen.)" if c.get("no_self_penetration") else ""
+                    lines.append(f"| {t} | {v}{note} | {c['num']}x{c['iters']} | {_pct(c['success'])} | {c['synth_s']:.1f} | "
+                                 f"{c['eval_s']:.1f} | {c['peak_mb']:.0f} | {_pct(c['tips_in_contact'])} | "
+                                 f"{c['max_penetration_mm_median']:.1f} | {c.get('code_version', '-')} | {why} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tasks", default=",".join(TASKS), help="comma-separated task names")
+    ap.add_argument("--variants", default="baseline,l2,nocpn,full,d0_k1e2,d15_k1e4,d0_k1e4")
+    ap.add_argument("--hands", default="shadow", help="comma-separated; uninstalled hands are skipped")
+    ap.add_argument("--num", type=int, default=100, help="poses per task and variant")
+    ap.add_argument("--num-k1e4", type=int, default=None, help="poses for the K = 1e4 variants (default --num)")
+    ap.add_argument("--iters", type=int, default=500)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-self-penetration", default="leap", help="hands run with self-penetration weight 0")
+    ap.add_argument("--records", type=Path, default=RECORDS)
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--force", action="store_true", help="redo existing records")
+    ap.add_argument("--report-only", action="store_true")
+    args = ap.parse_args()
+    from benchmarks.common import machine_description
+
+    machine = machine_description()
+    args.records.mkdir(parents=True, exist_ok=True)
+    if not args.report_only:
+        from datagen.hands import load_hand
+
+        tasks, variants = args.tasks.split(","), args.variants.split(",")
+        for v in variants:
+            if v not in VARIANTS:
+                raise SystemExit(f"unknown variant {v!r}; known: {list(VARIANTS)}")
+        objects = Objects()
+        for hname in args.hands.split(","):
+            try:
+                hand = load_hand(hname)
+            except Exception as exc:  # noqa: BLE001 - an optional hand that is not installed
+                print(f"skipping hand {hname}: {exc}", flush=True)
+                continue
+            for v in variants:
+                num = args.num_k1e4 if (args.num_k1e4 and "k1e4" in v) else args.num
+                for t in tasks:
+                    path = record_path(args.records, hname, v, t, num, args.iters)
+                    if path.exists() and not args.force:
+                        continue
+                    rec = run_record(hand, t, v, num, args.iters, objects, args.seed,
+                                     hname in args.no_self_penetration.split(","))
+                    path.write_text(json.dumps(rec, indent=1))
+                    print(f"{hname} {v} {t}: {100 * rec['success']:.0f}% synth {rec['synth_s']:.1f}s eval "
+                          f"{rec['eval_s']:.1f}s peak {rec['peak_mb']:.0f}MB {rec['reasons']}", flush=True)
+                    args.out.parent.mkdir(parents=True, exist_ok=True)
+                    args.out.write_text(render(args.records, machine))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(render(args.records, machine))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
