@@ -202,7 +202,8 @@ def task_definitions() -> list[str]:
             w = test.disturbance(cfg.object_mass_kg, obj.scale_m, cfg.force_per_kg)
             tr = test.max_translation_m or cfg.max_translation_m
             rot = test.max_rotation_deg or cfg.max_rotation_deg
-            dist = f"[{', '.join(f'{x:g}' for x in np.round(w, 4) + 0.0)}] N, N m; < {tr * 100:g} cm, < {rot:g} deg"
+            dist = (f"[{', '.join(f'{x:g}' for x in np.round(w, 4) + 0.0)}] N, N m; < {tr * 100:g} cm, < {rot:g} deg "
+                    f"from the {test.measure_from} pose")
         j = obj.joint
         joint = j.kind if j.kind == "free" else f"{j.kind} {list(j.axis)} @ {list(j.anchor_m)}"
         out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
@@ -219,7 +220,8 @@ def render(records: Path, machine: str) -> str:
              "`datagen/synth/tasks/<task>.yaml` (TWS, fingers, initial pose, and the `eval` block each task's test "
              "comes from). Success = MuJoCo task test: the disturbance -w_t (magnitudes per task in its YAML) on the "
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
-             "six-direction hold test (1 N, 5 cm / 15 deg). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
+             "six-direction hold test (1 N, 5 cm / 15 deg from the initial pose). Task tests measure the object's motion from "
+             "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
              "Each cell: success % (poses x iterations of that cell in the size table below).", ""]
     lines += task_definitions() + [""]
     for hand in hands:

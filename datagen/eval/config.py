@@ -62,8 +62,11 @@ class TaskTest:
     object scales (a torque of F * arm * scale N m). The object moves on ``joint``: ``free``
     (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor``) or ``slide`` (prismatic
     along ``axis``); ``anchor`` is in metres. Success: the object stays within
-    ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s); ``min_touching_links``
-    (None: the config's) overrides the no-contact rule (a one-finger press touches one link).
+    ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s), measured from the
+    object's initial pose (``measure_from: initial``, as the six-direction protocol) or from its
+    pose once the hand has closed (``closed``: only the disturbance's effect counts, as in the
+    paper's task test where the hand is fixed at the grasp); ``min_touching_links`` (None: the
+    config's) overrides the no-contact rule (a one-finger press touches one link).
     """
 
     w_t: tuple[float, float, float, float, float, float]
@@ -76,6 +79,7 @@ class TaskTest:
     max_translation_m: float | None = None
     max_rotation_deg: float | None = None
     min_touching_links: int | None = None
+    measure_from: str = "initial"
 
     def __post_init__(self) -> None:
         w = tuple(float(x) for x in self.w_t)
@@ -93,6 +97,8 @@ class TaskTest:
         for name in ("torque_nm", "max_translation_m", "max_rotation_deg"):
             v = getattr(self, name)
             _check(v is None or (isinstance(v, (int, float)) and v > 0), f"TaskTest.{name}", f"must be > 0 or null, got {v!r}")
+        _check(self.measure_from in ("initial", "closed"), "TaskTest.measure_from",
+               f"must be 'initial' or 'closed', got {self.measure_from!r}")
         _check(self.min_touching_links is None or (isinstance(self.min_touching_links, int) and self.min_touching_links >= 0),
                "TaskTest.min_touching_links", f"must be an int >= 0 or null, got {self.min_touching_links!r}")
 

@@ -10,7 +10,9 @@ Order of decisions (the first that applies is the reason):
 4. optional filters at the grasp pose: ``grasp_penetration``, ``self_penetration``, ``low_epsilon``;
 5. the simulated test: ``unstable`` (the simulation diverged), ``slipped_<dir>`` (the first
    direction, in ``+x -x +y -y +z -z`` order, failing at the earliest failing check) or
-   ``slipped_task`` for a task test; else ``ok``.
+   ``slipped_task`` for a task test; else ``ok``. The object's motion is measured from its
+   initial pose (the public protocol), or for a task test with ``measure_from: closed`` from its
+   pose once the hand has closed (the paper's task test: hand fixed, object unmoved under -w_t).
 
 Metrics are computed for every grasp (also rejected ones) at the grasp pose: penetration,
 self penetration, per-finger contact distance, and the epsilon metric
@@ -219,6 +221,11 @@ class Evaluator:
         pos0 = closed.xpos[scene.object_body].copy()
         quat0 = closed.xquat[scene.object_body].copy()
         close_hand(scene, closed, poses, cfg)
+        if test is not None and test.measure_from == "closed":
+            # from where the closed hand holds it (the paper's task test: the hand fixed at the
+            # grasp, the wrench applied, the object unmoved)
+            pos0 = closed.xpos[scene.object_body].copy()
+            quat0 = closed.xquat[scene.object_body].copy()
         n0 = int(round(closed.time / cfg.timestep_s))
         if closed.warning[mujoco.mjtWarning.mjWARN_BADQACC].number or not np.all(np.isfinite(closed.qpos)):
             dirs = [DirectionResult(False, math.inf, math.inf, True)] * n_dir

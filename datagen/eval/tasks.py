@@ -14,6 +14,7 @@ A task YAML (``datagen/synth/tasks/<name>.yaml``) carries, next to what synthesi
       max_translation_m: 0.01 # pass thresholds (null: the EvalConfig's)
       max_rotation_deg: 10
       min_touching_links: 1   # no-contact rule override (one-finger press)
+      measure_from: closed    # motion measured from the object's pose once the hand has closed
 
 The test's ``w_t`` is the task's (and a row's own ``w_t`` replaces it at evaluation time).
 """
@@ -28,7 +29,7 @@ from .config import EvalError, TaskTest
 __all__ = ["EVAL_KEYS", "builtin_task_test", "has_builtin_test", "task_object", "task_test_from_spec"]
 
 EVAL_KEYS = ("test", "object", "force_n", "torque_nm", "torque_arm", "max_translation_m", "max_rotation_deg",
-             "min_touching_links")
+             "min_touching_links", "measure_from")
 _TESTS = ("task", "six_direction")
 
 

@@ -34,6 +34,7 @@ def test_every_task_yaml_loads_and_its_test_resolves(name):
     else:
         assert spec.gamma_deg == 15 and test.w_t == pytest.approx(np.array(spec.w_t) / np.linalg.norm(spec.w_t))
         assert (test.joint, test.axis, test.anchor) == (joint.kind, joint.axis, joint.anchor_m)
+        assert test.measure_from == "closed"  # the paper's test: the hand fixed, the object unmoved
         assert {"turn": "hinge", "push": "slide", "pull": "slide", "lift": "free"}[name.split("_")[0]] == test.joint
     # the palm aims at a point within 8 cm of the object's bounding box (its frame, metres)
     ext = T.build(obj).mesh.extents
@@ -91,6 +92,7 @@ def _write(tmp_path, eval_block: str, extra: str = "") -> str:
     ("  test: task\n  object: knob2\n  torque: 1\n", "torque"),
     ("  test: task\n  object: knob2\n  torque_nm: -1\n", "torque_nm"),
     ("  test: task\n  object: knob2\n  max_rotation_deg: 0\n", "max_rotation_deg"),
+    ("  test: task\n  object: knob2\n  measure_from: later\n", "measure_from"),
 ])
 def test_bad_eval_block_names_the_field(tmp_path, block, field):
     with pytest.raises(EvalError, match=field):
