@@ -116,6 +116,22 @@ class Objects:
         return self._cache[name]
 
 
+STRESS = (3, 10)  #: disturbance multipliers of the extra robustness columns
+
+
+def stressed_config(task_name: str, k: float):
+    """An `EvalConfig` whose test of ``task_name`` has a ``k`` times larger disturbance."""
+    from datagen.eval import EvalConfig
+
+    cfg = EvalConfig()
+    test = cfg.task_test(task_name)
+    if test is None:  # six directions: k times the force
+        return dataclasses.replace(cfg, force_per_kg=k * cfg.force_per_kg)
+    f = test.force_n if test.force_n is not None else cfg.force_per_kg * cfg.object_mass_kg
+    scaled = dataclasses.replace(test, force_n=k * f, torque_nm=None if test.torque_nm is None else k * test.torque_nm)
+    return dataclasses.replace(cfg, tasks={**cfg.tasks, task_name: scaled})
+
+
 def code_version() -> str:
     """``git describe --always --dirty`` of this checkout, or $DATAGEN_CODE_VERSION (e.g. in an export)."""
     import subprocess
@@ -145,17 +161,23 @@ def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects
         synth_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     reasons, success = [], []
+    stress = {k: [] for k in STRESS}
+    poses = [torch.stack([res.pregrasp[b], res.grasp[b], res.squeeze[b]]).double().numpy() for b in range(num)]
     with Evaluator(hand, EvalConfig()) as ev:
-        for b in range(num):
-            poses = torch.stack([res.pregrasp[b], res.grasp[b], res.squeeze[b]]).double().numpy()
-            r = ev.evaluate(pieces, poses, task=task_name, w_t=task.w_t)
+        for p in poses:
+            r = ev.evaluate(pieces, p, task=task_name, w_t=task.w_t)
             reasons.append(r.reason)
             success.append(bool(r.success))
     eval_s = time.perf_counter() - t0
+    for k in STRESS:  # the same poses under a k times larger disturbance (a margin, not the paper's metric)
+        with Evaluator(hand, stressed_config(task_name, k)) as ev:
+            stress[k] = [bool(ok and ev.evaluate(pieces, p, task=task_name, w_t=task.w_t).success)
+                         for p, ok in zip(poses, success)]
     usable = res.usable(cfg.contact_threshold_m)
     return {"hand": hand.name, "task": task_name, "variant": variant, "num": num, "iters": iters, "seed": seed,
             "no_self_penetration": no_self_pen, "fingers": res.fingers,
             "success": float(np.mean(success)), "reasons": dict(collections.Counter(reasons)),
+            "success_stress": {str(k): float(np.mean(v)) for k, v in stress.items()},
             "synth_s": synth_s, "eval_s": eval_s, "peak_mb": mem.peak_mb,
             "tips_in_contact": float(usable.float().mean()),
             "max_penetration_mm_median": float(res.max_penetration.median()) * 1e3,
@@ -238,6 +260,19 @@ def render(records: Path, machine: str) -> str:
                          + f" | {avg} | {PAPER[v][1] if hand == 'shadow' else '-'} |")
             if hand == "shadow":
                 lines.append(f"| paper {v} | " + " | ".join(str(x) for x in PAPER[v][0]) + f" | {PAPER[v][1]} | |")
+        lines.append("")
+        lines += [f"### Robustness margin: {hand}, success % at 1x / 3x / 10x the disturbance (same poses)", "",
+                  "| variant | " + " | ".join(COLUMNS) + " | average |", "|---|" + "---|" * (len(COLUMNS) + 1)]
+        for v in ("baseline", "l2", "nocpn", "full"):
+            cells = [_pick(recs, hand, v, t) for t in TASKS]
+            if not any(c and "success_stress" in c for c in cells):
+                continue
+            fmt = lambda c: "-" if not c or "success_stress" not in c else "/".join(  # noqa: E731
+                _pct(x) for x in [c["success"]] + [c["success_stress"][str(k)] for k in STRESS])
+            got = [c for c in cells if c and "success_stress" in c]
+            avg = "/".join(f"{100 * np.mean([c['success'] if k == 1 else c['success_stress'][str(k)] for c in got]):.0f}"
+                           for k in (1,) + STRESS)
+            lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(fmt(c) for c in cells) + f" | {avg} |")
         lines.append("")
         hyper = [v for v in ("full", "d15_k1e4", "d0_k1e2", "d0_k1e4") if any(_pick(recs, hand, v, t) for t in TASKS)]
         if hyper:
