@@ -152,7 +152,12 @@ class SynthConfig:
     step_decay: float = 0.95  #: step multiplier every `decay_every` iterations
     decay_every: int = 50
     momentum: float = 0.9  #: m <- (momentum * m + g) / 2 on per-group normalized gradients
-    squeeze_rad: float = 0.1  #: pregrasp opens each joint by up to this towards the open pose
+    squeeze_mode: str = "force"  #: pregrasp/squeeze: "force" (balanced grip forces), "normal" or "joint" (see squeeze.py)
+    squeeze_force_n: float = 10.0  #: "force": largest fingertip grip force, N (10 N: best of 2/4/10/20 in MuJoCo holds)
+    squeeze_kp: float = 5.0  #: "force": position-actuator stiffness the squeeze is computed for, N m/rad (eval protocol)
+    squeeze_gap_m: float = 0.002  #: "force": extra fingertip travel along the normal (sphere overshoot), m
+    squeeze_m: float = 0.01  #: "normal": fingertips move this far out (pregrasp) / in (squeeze) along the normals
+    squeeze_rad: float = 0.1  #: "joint": pregrasp opens each joint by up to this towards the open pose
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
     sphere_margin_m: float = 0.0015  #: spheres overshoot the hand's collision shapes (<= 2.8 mm): they may sink this far
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
@@ -165,6 +170,8 @@ class SynthConfig:
             raise ConfigError(f"SynthConfig.task_energy_kind must be 'cos' or 'l2', got {self.task_energy_kind!r}")
         if not 0 <= self.delta_deg <= 45:
             raise ConfigError(f"SynthConfig.delta_deg must lie in [0, 45], got {self.delta_deg}")
+        if self.squeeze_mode not in ("force", "normal", "joint"):
+            raise ConfigError(f"SynthConfig.squeeze_mode must be 'force', 'normal' or 'joint', got {self.squeeze_mode!r}")
         if not self.mu > 0:
             raise ConfigError(f"SynthConfig.mu must be > 0, got {self.mu}")
 

@@ -6,8 +6,9 @@ batched over all of them; only the distance queries loop over the distinct objec
 
 Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/radians):
 ``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``pregrasp`` the
-same root with each joint opened by up to ``cfg.squeeze_rad`` towards the open pose; ``squeeze``
-= ``2 grasp - pregrasp`` (clipped to limits), the target that makes position actuators press;
+same root with the task fingertips moved ``cfg.squeeze_m`` out along their contact normals
+(:mod:`datagen.synth.squeeze`); ``squeeze`` = ``2 grasp - pregrasp`` (within limits), the target
+that makes position actuators press along the normals;
 the task fingertips' contact points and inward normals; final energy terms; epsilon of those
 contacts; the initial pose (for rendering).
 """
@@ -22,6 +23,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
+from datagen.synth.squeeze import force_squeeze, normal_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
 __all__ = ["SynthesisResult", "finger_joint_groups", "synthesize"]
@@ -49,8 +51,8 @@ class SynthesisResult:
         return (self.tip_distance.abs().amax(-1) <= contact_threshold_m) & (self.max_penetration <= max_penetration_m)
 
 
-def finger_joint_groups(hand) -> list[torch.Tensor]:
-    """Joint index groups: one per fingertip chain, plus one for joints shared by all (wrist)."""
+def _joint_groups(hand) -> dict[str, list[int]]:
+    """Joint indices per fingertip chain (``finger<k>``) and ``shared`` (on several chains: wrist)."""
     m = hand.mj_model
     link_body = {name: i + 1 for i, name in enumerate(hand.link_names)}
     chains = []
@@ -66,7 +68,20 @@ def finger_joint_groups(hand) -> list[torch.Tensor]:
         owners = [k for k, anc in enumerate(chains) if b in anc]
         key = f"finger{owners[0]}" if len(owners) == 1 else "shared"
         groups.setdefault(key, []).append(j)
-    return [torch.tensor(v, device=hand.device) for v in groups.values()]
+    return groups
+
+
+def finger_joint_groups(hand) -> list[torch.Tensor]:
+    """Joint index groups: one per fingertip chain, plus one for joints shared by all (wrist)."""
+    return [torch.tensor(v, device=hand.device) for v in _joint_groups(hand).values()]
+
+
+def _finger_joint_mask(hand) -> torch.Tensor:
+    """(J,) bool: joints that belong to exactly one fingertip chain (not the wrist)."""
+    mask = torch.zeros(hand.num_joints, dtype=torch.bool, device=hand.device)
+    for key, idx in _joint_groups(hand).items():
+        mask[idx] = key != "shared"
+    return mask
 
 
 def _resolve_fingers(hand, task: TaskSpec) -> list[int]:
@@ -117,9 +132,16 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         root_f = x.root_pose()
         state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m)
-        opening = (hand.open_pose - grasp_j).clamp(-cfg.squeeze_rad, cfg.squeeze_rad)
-        pre_j = hand.apply_couplings(grasp_j + opening)
-        sq_j = hand.clamp_joints(2 * grasp_j - pre_j)
+        movable = _finger_joint_mask(hand)
+        if cfg.squeeze_mode == "force":
+            pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, tip_spheres, state.contact_points, state.contact_normals,
+                                        cfg.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
+        elif cfg.squeeze_mode == "normal":
+            pre_j, sq_j = normal_squeeze(hand, root_f, grasp_j, tip_spheres, state.contact_normals, cfg.squeeze_m, movable)
+        else:  # open every joint by up to squeeze_rad towards the open pose
+            opening = (hand.open_pose - grasp_j).clamp(-cfg.squeeze_rad, cfg.squeeze_rad)
+            pre_j = hand.apply_couplings(grasp_j + opening)
+            sq_j = hand.clamp_joints(2 * grasp_j - pre_j)
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
                          normalize=cfg.normalize).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))
     energies = {k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")}

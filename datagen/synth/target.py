@@ -71,16 +71,22 @@ class GraspTarget:
     def approx_query(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Grid-based ``(distance, closest, outward normal)`` for ``(..., 3)`` m.
 
-        The normal is the (detached) grid gradient and ``closest = p - d n``, so the gradient of
-        ``closest`` is the tangent projection ``I - n n^T``. Accurate to the grid (~0.2 mm).
+        The normal is the (detached) central difference of the grid distance over one cell: a
+        continuous field, unlike the trilinear gradient, which jumps at every cell face and so
+        makes the contact normals (and the task energy) jump under a line search. ``closest =
+        p - d n``, so its gradient is the tangent projection ``I - n n^T``. Accurate to the
+        grid (~0.2 mm).
         """
         if self.grid is None:
             res = self.query(points)
             return res.distance, res.closest, res.normal
-        with torch.enable_grad():
-            p = points.detach().requires_grad_(True)
-            (g,) = torch.autograd.grad(self.distance(p).sum(), p)
-        n = g / g.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        with torch.no_grad():
+            g = self.grid
+            h = float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * self.scale
+            p = points.detach()
+            offs = torch.eye(3, dtype=p.dtype, device=p.device) * h
+            grad = torch.stack([self.distance(p + o) - self.distance(p - o) for o in offs], dim=-1)
+            n = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         d = self.distance(points)
         return d, points - d[..., None] * n, n
 

@@ -1,0 +1,124 @@
+"""Pregrasp and squeeze poses that move the contact fingertips along their contact normals.
+
+A grasp is executed by position-controlled fingers: the hand closes from the pregrasp to the
+grasp, then its actuator targets move on to the squeeze pose, and the gap between the squeeze
+targets and where the object stops the fingers sets the grip forces (tau = kp dq). Opening every
+joint towards the open pose (the naive pregrasp) also moves abduction joints sideways, so the
+squeeze pushes fingers across the object and pushes it out of the hand. Here each task
+fingertip's contact sphere instead moves ``distance_m`` straight out along its contact normal at
+the pregrasp, and straight in at the squeeze (``squeeze = 2 grasp - pregrasp``): the squeeze
+forces point along the normals the GWS was computed with.
+
+The joint displacement is the damped least-squares solution ``dq = J^T (J J^T + lambda^2 I)^-1 e``
+of the fingertips' positional Jacobian ``J (3F, J)`` (joints shared by several fingertips, e.g.
+the wrist, are held fixed), ``e (3F,)`` the wanted fingertip displacements: a first-order step,
+exact to O(distance^2).
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["balanced_forces", "force_squeeze", "normal_squeeze", "tip_jacobian"]
+
+
+def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
+    """``(B, 3F, J)`` d(contact sphere centres)/d(joints), m/rad, through the joint couplings.
+
+    root_pose ``(B, 7)``, joints ``(B, J)``, tip_spheres ``(F,)`` sphere indices.
+    """
+    with torch.enable_grad():
+        q = joints.detach().requires_grad_(True)
+        centres, _ = hand.spheres(root_pose.detach(), hand.apply_couplings(q))
+        x = centres[:, tip_spheres].reshape(joints.shape[0], -1)  # (B, 3F)
+        rows = [torch.autograd.grad(x[:, r].sum(), q, retain_graph=r < x.shape[1] - 1)[0] for r in range(x.shape[1])]
+    return torch.stack(rows, dim=1)
+
+
+def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
+                   inward_normals: torch.Tensor, distance_m: float, movable: torch.Tensor,
+                   damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(pregrasp, squeeze)`` joints ``(B, J)`` (coupled, within limits) for grasp ``joints``.
+
+    Args:
+        root_pose: ``(B, 7)`` hand root [x y z qw qx qy qz] (kept fixed).
+        joints: ``(B, J)`` grasp joints, radians.
+        tip_spheres: ``(F,)`` contact sphere index of each task fingertip.
+        inward_normals: ``(B, F, 3)`` unit contact normals pointing into the object.
+        distance_m: how far each fingertip moves out (pregrasp) and in (squeeze).
+        movable: ``(J,)`` bool, joints the motion may use (False: held at the grasp).
+        damping_m: lambda of the damped least squares, m/rad (keeps dq bounded near singularities).
+    """
+    B, F = inward_normals.shape[:2]
+    J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
+    e = (-distance_m * inward_normals).reshape(B, 3 * F, 1)  # outward motion of each fingertip
+    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
+    dq = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
+    pre = hand.apply_couplings(joints + dq)
+    squeeze = hand.apply_couplings(2 * joints - pre)
+    return pre, squeeze
+
+
+def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, iters: int = 300) -> torch.Tensor:
+    """``(B, F, 3)`` contact forces with the smallest net wrench, each in its friction cone.
+
+    ``f_i = lam_i n_i + t_i`` with ``lam_i >= 1``, ``t_i . n_i = 0``, ``|t_i| <= mu lam_i``,
+    minimizing ``|sum f_i|^2 + |sum (p_i - c) x f_i|^2 / L^2`` (``c`` the contact centroid, ``L``
+    the mean contact distance from it, as in the contact position normalization) by projected
+    gradient descent (FISTA). A force-closure set reaches zero net wrench (internal forces only); the
+    residual of any other set is as small as the cones allow. points ``(B, F, 3)`` m.
+    """
+    c = points.mean(1, keepdim=True)
+    r = points - c
+    r = r / r.norm(dim=-1).mean(1)[:, None, None].clamp_min(1e-9)
+    n = inward_normals / inward_normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    F = points.shape[1]
+    def project(f):  # Euclidean projection onto {lam >= 1, |t| <= mu lam}
+        lam = (f * n).sum(-1, keepdim=True)
+        t = f - lam * n
+        s = t.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        lam_k = ((lam + mu * s) / (1 + mu * mu)).clamp_min(0.0)  # onto the cone (outside it)
+        inside = s <= mu * lam
+        lam_c = torch.where(inside, lam, lam_k)
+        t_c = torch.where(inside, t, t * (mu * lam_k / s))
+        low = lam_c < 1.0  # the cone's projection violates lam >= 1: project onto the disc lam = 1
+        t_c = torch.where(low, t * (mu / s).clamp_max(1.0), t_c)
+        return torch.where(low, torch.ones_like(lam_c), lam_c) * n + t_c
+
+    f = y = n.clone()
+    # Lipschitz constant of the residual's gradient: 2 |A|^2 <= 2 F (1 + max |r|^2)
+    step = 1.0 / (2 * F * (1 + r.square().sum(-1).amax(-1)))[:, None, None]
+    for k in range(iters):  # accelerated projected gradient (FISTA)
+        force = y.sum(1, keepdim=True)  # (B, 1, 3)
+        torque = torch.linalg.cross(r, y).sum(1, keepdim=True)
+        grad = 2 * (force + torch.linalg.cross(torque.expand_as(r), r))  # d/df_i of the residual
+        f_next = project(y - step * grad)
+        y = f_next + (k / (k + 3)) * (f_next - f)
+        f = f_next
+    return f
+
+
+def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
+                  points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
+                  approach_m: float, movable: torch.Tensor,
+                  damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze makes balanced grip forces.
+
+    Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
+    ``tau = kp dq = J^T f``: the squeeze ``grasp + J^T f / kp`` presses each fingertip on the
+    object with the :func:`balanced_forces` ``f``, scaled so the largest is ``force_n`` newtons,
+    plus the fingertip motion that closes ``approach_m`` along the normal (the gap between the
+    collision spheres and the hand's real geometry). The pregrasp is the mirror image
+    (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
+    """
+    B, F = points.shape[:2]
+    J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
+    f = balanced_forces(points, inward_normals, mu)
+    f = f * (force_n / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    dq_force = (J.transpose(1, 2) @ f.reshape(B, 3 * F, 1)).squeeze(-1) / kp
+    e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
+    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
+    dq_gap = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
+    squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
+    pre = hand.apply_couplings(2 * joints - squeeze)
+    return pre, squeeze

@@ -1,0 +1,121 @@
+"""Pregrasp/squeeze construction: balanced grip forces and fingertip motion along the normals."""
+
+import numpy as np
+import pytest
+import torch
+from scipy.optimize import linprog
+
+from datagen.hands import load_hand
+from datagen.synth.energies import contact_sphere_index
+from datagen.synth.squeeze import balanced_forces, force_squeeze, normal_squeeze
+
+
+@pytest.fixture(scope="module")
+def hand():
+    return load_hand("shadow")
+
+
+def _zero_wrench_feasible(p: np.ndarray, n: np.ndarray, mu: float) -> bool:
+    """LP (8-edge pyramid cones): do forces with every normal part >= 1 and zero net wrench exist?"""
+    F = len(p)
+    cols = []
+    for pi, ni in zip(p, n):
+        t1 = np.cross(ni, [1.0, 0, 0] if abs(ni[0]) < 0.9 else [0, 1.0, 0])
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(ni, t1)
+        for k in range(8):
+            a = 2 * np.pi * k / 8
+            d = ni + mu * np.cos(np.pi / 8) * (np.cos(a) * t1 + np.sin(a) * t2)
+            cols.append(np.concatenate([d, np.cross(pi - p.mean(0), d)]))
+    A_eq = np.array(cols).T  # (6, 8F)
+    A_ub = np.zeros((F, 8 * F))  # -(normal part of contact i) <= -1
+    for i in range(F):
+        A_ub[i, 8 * i:8 * i + 8] = -1.0
+    res = linprog(np.zeros(8 * F), A_ub=A_ub, b_ub=-np.ones(F), A_eq=A_eq, b_eq=np.zeros(6), bounds=(0, None))
+    return res.status == 0
+
+
+def test_balanced_forces_cancel_for_force_closure_sets_and_not_otherwise():
+    rng = np.random.default_rng(3)
+    mu = 0.5
+    for trial in range(12):
+        p = rng.normal(size=(4, 3))
+        p = 0.04 * p / np.linalg.norm(p, axis=1, keepdims=True)
+        if trial % 3 == 0:
+            p[:, 2] = np.abs(p[:, 2])  # one hemisphere only: often no balancing forces
+        n = -p / np.linalg.norm(p, axis=1, keepdims=True)
+        f = balanced_forces(torch.tensor(p[None]), torch.tensor(n[None]), mu)[0].numpy()
+        lam = (f * n).sum(-1)
+        tang = np.linalg.norm(f - lam[:, None] * n, axis=1)
+        assert (lam >= 1 - 1e-9).all() and (tang <= mu * lam + 1e-9).all()  # inside the cones
+        r = (p - p.mean(0)) / np.linalg.norm(p - p.mean(0), axis=1).mean()
+        residual = np.linalg.norm(np.concatenate([f.sum(0), np.cross(r, f).sum(0)]))
+        if _zero_wrench_feasible(p, n, mu * np.cos(np.pi / 8)):  # inscribed pyramid feasible -> cone feasible
+            assert residual < 1e-2, (trial, residual)
+        elif not _zero_wrench_feasible(p, n, mu / np.cos(np.pi / 8)):  # circumscribed infeasible -> cone infeasible
+            assert residual > 1e-3, (trial, residual)
+
+
+def test_antipodal_pair_gets_opposing_normal_forces():
+    p = torch.tensor([[[0.03, 0.0, 0.0], [-0.03, 0.0, 0.0]]], dtype=torch.float64)
+    f = balanced_forces(p, -p / 0.03, 0.5)
+    assert torch.allclose(f, torch.tensor([[[-1.0, 0, 0], [1.0, 0, 0]]], dtype=torch.float64), atol=1e-9)
+
+
+def _tips(hand, root, joints, spheres):
+    centres, _ = hand.spheres(root, joints)
+    return centres[:, spheres]
+
+
+def test_normal_squeeze_moves_fingertips_along_their_normals(hand):
+    torch.manual_seed(0)
+    B = 6
+    root = torch.tensor([0, 0, 0, 1.0, 0, 0, 0]).expand(B, 7)
+    joints = hand.apply_couplings(0.5 * (hand.joint_lower + hand.joint_upper) + 0.1 * (torch.rand(B, hand.num_joints) - 0.5))
+    spheres = contact_sphere_index(hand)
+    tips = _tips(hand, root, joints, spheres)
+    n = torch.nn.functional.normalize(tips.mean(1, keepdim=True) - tips, dim=-1)  # towards a held object
+    movable = torch.ones(hand.num_joints, dtype=torch.bool)
+    movable[:2] = False  # the wrist
+    pre, sq = normal_squeeze(hand, root, joints, spheres, n, 0.002, movable, damping_m=1e-3)
+    x0, xp, xs = (_tips(hand, root, j, spheres) for j in (joints, pre, sq))
+    # the finger chains are redundant enough for small moves: each tip moves ~2 mm against/along n
+    along_pre = ((xp - x0) * n).sum(-1)
+    assert (along_pre.median() < -0.0015) and (along_pre.median() > -0.0025)
+    assert ((xs - x0) * n).sum(-1).median() > 0.0015
+    assert torch.equal(pre[:, :2], joints[:, :2]) and torch.equal(sq[:, :2], joints[:, :2])
+
+
+def test_force_squeeze_is_the_statics_of_position_actuators(hand):
+    # squeeze - grasp = J^T f / kp: check with finite differences of MuJoCo-independent FK,
+    # i.e. that joint torques kp (squeeze - grasp) do the virtual work of forces f on the tips
+    torch.manual_seed(1)
+    B = 3
+    root = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=torch.float64).expand(B, 7)
+    hand64 = load_hand("shadow", dtype=torch.float64)
+    mid = 0.5 * (hand64.joint_lower + hand64.joint_upper)
+    joints = hand64.apply_couplings(mid + 0.1 * (torch.rand(B, hand64.num_joints, dtype=torch.float64) - 0.5))
+    spheres = contact_sphere_index(hand64)
+    tips = _tips(hand64, root, joints, spheres)
+    normals = torch.nn.functional.normalize(tips.mean(1, keepdim=True) - tips, dim=-1)
+    movable = torch.ones(hand64.num_joints, dtype=torch.bool)
+    kp, force = 5.0, 3.0
+    pre, sq = force_squeeze(hand64, root, joints, spheres, tips, normals, 0.5, kp, force, 0.0, movable)
+    f = balanced_forces(tips, normals, 0.5)
+    f = f * (force / f.norm(dim=-1).amax(-1))[:, None, None]
+    tau = kp * (sq - joints)
+    followers = {c[0] for c in hand64._couple}
+    checked = 0
+    for b in range(B):
+        for j in set(range(hand64.num_joints)) - followers:
+            lo, hi = float(hand64.joint_lower[j]), float(hand64.joint_upper[j])
+            if not lo < float(sq[b, j]) < hi:
+                continue  # the squeeze was clipped at a limit
+            dq = torch.zeros_like(joints[b:b + 1])
+            dq[0, j] = 1e-6  # a virtual displacement of independent joint j (followers follow)
+            x1 = _tips(hand64, root[b:b + 1], hand64.apply_couplings(joints[b:b + 1] + dq), spheres)
+            work = float(((x1 - tips[b:b + 1]) * f[b:b + 1]).sum() / 1e-6)  # generalized force of f on joint j
+            assert abs(work - float(tau[b, j])) < 1e-4 + 1e-3 * abs(work), (b, j, work, float(tau[b, j]))
+            checked += 1
+    assert checked > 10
+    assert torch.allclose(pre, hand64.apply_couplings(2 * joints - sq))
