@@ -234,8 +234,9 @@ def task_definitions() -> list[str]:
 
 
 def render(records: Path, machine: str) -> str:
-    recs = _load(records)
-    hands = sorted({r["hand"] for r in recs}, key=lambda h: (h != "shadow", h))
+    allrecs = _load(records)
+    versions = sorted({r.get("code_version", "-") for r in allrecs},
+                      key=lambda v: min(r["finished_at"] for r in allrecs if r.get("code_version", "-") == v))
     lines = ["# Task-oriented benchmark (paper Table II and its hyper-parameter table)", "",
              f"Machine: {machine}", "",
              "Ten tasks on procedural objects with virtual joints (`datagen/objects/task_objects.py`), task specs "
@@ -244,8 +245,20 @@ def render(records: Path, machine: str) -> str:
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
              "six-direction hold test (1 N, 5 cm / 15 deg from the initial pose). Task tests measure the object's motion from "
              "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
-             "Each cell: success % (poses x iterations of that cell in the size table below).", ""]
+             "Each cell: success % (poses x iterations of that cell in the size table below). Results are grouped by "
+             "the code version they ran at; the task table above is the current checkout's (`git log "
+             "datagen/synth/tasks` shows what changed between versions).", ""]
     lines += task_definitions() + [""]
+    for version in versions:
+        recs = [r for r in allrecs if r.get("code_version", "-") == version]
+        lines += [f"# Results at code version {version}", ""]
+        lines += _render_version(recs)
+    return "\n".join(lines)
+
+
+def _render_version(recs: list[dict]) -> list[str]:
+    lines = []
+    hands = sorted({r["hand"] for r in recs}, key=lambda h: (h != "shadow", h))
     for hand in hands:
         lines += [f"## Table II: {hand}", "",
                   "| variant | " + " | ".join(COLUMNS) + " | average | paper average |",
@@ -302,7 +315,7 @@ def render(records: Path, machine: str) -> str:
                                  f"{c['eval_s']:.1f} | {c['peak_mb']:.0f} | {_pct(c['tips_in_contact'])} | "
                                  f"{c['max_penetration_mm_median']:.1f} | {c.get('code_version', '-')} | {why} |")
         lines.append("")
-    return "\n".join(lines)
+    return lines
 
 
 def main():

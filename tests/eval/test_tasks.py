@@ -36,9 +36,9 @@ def test_every_task_yaml_loads_and_its_test_resolves(name):
         assert (test.joint, test.axis, test.anchor) == (joint.kind, joint.axis, joint.anchor_m)
         assert test.measure_from == "closed"  # the paper's test: the hand fixed, the object unmoved
         assert {"turn": "hinge", "push": "slide", "pull": "slide", "lift": "free"}[name.split("_")[0]] == test.joint
-    # the palm aims at a point within 8 cm of the object's bounding box (its frame, metres)
+    # the palm aims at most a hand length (15 cm) off the object's bounding box (its frame, metres)
     ext = T.build(obj).mesh.extents
-    assert np.all(np.abs(spec.init.target_m) <= ext / 2 + 0.08)
+    assert np.all(np.abs(spec.init.target_m) <= ext / 2 + 0.15)
     assert set(spec.fingers) <= {"th", "ff", "mf", "rf", "lf"}
 
 
