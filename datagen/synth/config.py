@@ -144,6 +144,8 @@ class SynthConfig:
     delta_deg: float = 15.0
     mu: float = 0.5  #: friction coefficient of the GWS model
     normalize: bool = True  #: contact position normalization
+    contact_model: str = "pcf"  #: "pcf" point contact with friction, "sfc" soft finger (torsional friction)
+    torsional_mu: float = 0.0  #: SFC torsional friction coefficient, m (torque <= torsional_mu * normal force)
     task_energy_kind: str = "cos"  #: "cos" (paper) or "l2" (ablation)
     weights: EnergyWeights = field(default_factory=EnergyWeights)
     step_translation_m: float = 0.002
@@ -170,6 +172,9 @@ class SynthConfig:
             raise ConfigError(f"SynthConfig.task_energy_kind must be 'cos' or 'l2', got {self.task_energy_kind!r}")
         if not 0 <= self.delta_deg <= 45:
             raise ConfigError(f"SynthConfig.delta_deg must lie in [0, 45], got {self.delta_deg}")
+        if self.contact_model not in ("pcf", "sfc") or self.torsional_mu < 0:
+            raise ConfigError(f"SynthConfig.contact_model must be 'pcf' or 'sfc' and torsional_mu >= 0, "
+                              f"got {self.contact_model!r}, {self.torsional_mu}")
         if self.squeeze_mode not in ("force", "normal", "joint"):
             raise ConfigError(f"SynthConfig.squeeze_mode must be 'force', 'normal' or 'joint', got {self.squeeze_mode!r}")
         if not self.mu > 0:

@@ -147,6 +147,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) 
         e_task = task_energy(
             state.contact_points, state.contact_normals, cfg.mu, list(task.w_t), task.gamma_deg, directions,
             kind=cfg.task_energy_kind, delta_deg=cfg.delta_deg, normalize=cfg.normalize,
+            contact_model=cfg.contact_model, torsional_mu=cfg.torsional_mu,
         ) / directions.shape[0]
     else:
         e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])

@@ -143,7 +143,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
             pre_j = hand.apply_couplings(grasp_j + opening)
             sq_j = hand.clamp_joints(2 * grasp_j - pre_j)
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
-                         normalize=cfg.normalize).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))
+                         normalize=cfg.normalize, contact_model=cfg.contact_model,
+                         torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))
     energies = {k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")}
     return SynthesisResult(
         object_index=object_index,
