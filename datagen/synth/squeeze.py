@@ -27,12 +27,15 @@ def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
 
     root_pose ``(B, 7)``, joints ``(B, J)``, tip_spheres ``(F,)`` sphere indices.
     """
-    with torch.enable_grad():
-        q = joints.detach().requires_grad_(True)
-        centres, _ = hand.spheres(root_pose.detach(), hand.apply_couplings(q))
-        x = centres[:, tip_spheres].reshape(joints.shape[0], -1)  # (B, 3F)
-        rows = [torch.autograd.grad(x[:, r].sum(), q, retain_graph=r < x.shape[1] - 1)[0] for r in range(x.shape[1])]
-    return torch.stack(rows, dim=1)
+    B, J = joints.shape
+    R = 3 * tip_spheres.shape[0]
+    with torch.enable_grad():  # one pass over R copies of the batch: copy r carries output row r
+        q = joints.detach().repeat(R, 1).requires_grad_(True)  # (R B, J)
+        T = hand.link_transforms(root_pose.detach().repeat(R, 1), hand.apply_couplings(q))
+        x = hand._apply(T, hand.sphere_link_index[tip_spheres], hand.sphere_centres_local[tip_spheres]).reshape(R, B, R)
+        rows = torch.arange(R, device=joints.device)
+        (g,) = torch.autograd.grad(x[rows, :, rows].sum(), q)
+    return g.reshape(R, B, J).transpose(0, 1)
 
 
 def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
