@@ -111,12 +111,14 @@ def contact_sphere_index(hand) -> torch.Tensor:
 
 
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
-                      exact_contacts: bool = True, sphere_margin: float = 0.0) -> HandObjectState:
+                      exact_contacts: bool = True, sphere_margin: float = 0.0,
+                      self_collision: bool = True) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
     picks the exact mesh SDF (default) or the SDF grid for the contacts. ``sphere_margin`` (m) is
     how far collision spheres may sink into the object before they count as penetrating.
+    ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0.
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -131,7 +133,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     return HandObjectState(
         tips=tips, tip_distance=d_tip, contact_points=closest, contact_normals=-outward,
         sphere_penetration=(pen * pen).sum(-1), max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
-        self_penetration=_pair_overlap(hand, centres_all, radii_all).square().sum(-1),
+        self_penetration=(_pair_overlap(hand, centres_all, radii_all).square().sum(-1) if self_collision
+                          else centres_all.new_zeros(centres_all.shape[0])),
         joint_violation=violation,
     )
 

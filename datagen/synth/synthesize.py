@@ -114,7 +114,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     def energy_fn(t, q, j):
         jj = hand.apply_couplings(j)
         state = hand_object_state(hand, targets, object_index, torch.cat([t, q], -1), jj, tip_spheres,
-                                  exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m)
+                                  exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
+                                  self_collision=cfg.weights.self_penetration > 0)
         terms = evaluate_state(state, cfg, task, directions)
         extras = {k: v.detach() for k, v in terms.as_dict().items()}
         extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
