@@ -185,7 +185,7 @@ def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects
 
 
 def record_path(records: Path, hand: str, variant: str, task: str, num: int, iters: int) -> Path:
-    return records / f"{hand}__{variant}__{task}__n{num}__i{iters}.json"
+    return records / f"{code_version()}__{hand}__{variant}__{task}__n{num}__i{iters}.json"
 
 
 # ----------------------------------------------------------------------------- report
@@ -289,11 +289,15 @@ def _render_version(recs: list[dict]) -> list[str]:
         lines.append("")
         hyper = [v for v in ("full", "d15_k1e4", "d0_k1e2", "d0_k1e4") if any(_pick(recs, hand, v, t) for t in TASKS)]
         if hyper:
+            common = [t for t in TASKS if all(_pick(recs, hand, v, t) for v in hyper)]
             lines += [f"## Hyper-parameters: {hand}", "",
+                      f"Averages over the {len(common)} tasks every row has ({', '.join(common)}); time = synthesis "
+                      "wall time per task at that row's size, memory = peak RSS above the (warm) process's RSS "
+                      "before that synthesis.", "",
                       "| variant | delta | K | poses x iters | success % (tasks) | synthesis s per task (median) "
                       "| peak memory MB (max) | paper SS / t / M |", "|---|---|---|---|---|---|---|---|"]
             for v in hyper:
-                cells = [c for c in (_pick(recs, hand, v, t) for t in TASKS) if c]
+                cells = [_pick(recs, hand, v, t) for t in common]
                 cfg = dict(VARIANTS[v][1])
                 sizes = sorted({f"{c['num']}x{c['iters']}" for c in cells})
                 paper = PAPER_HYPER[v]
