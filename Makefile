@@ -29,6 +29,10 @@ bench-gws: $(STAMP)
 bench-synth: $(STAMP)
 	$(PY) -m benchmarks.bench_synth
 
+.PHONY: bench-squeeze
+bench-squeeze: $(STAMP)
+	$(PY) -m benchmarks.bench_squeeze
+
 clean-venv:
 	rm -rf $(VENV)
 

@@ -90,7 +90,7 @@ class TaskSpec:
     gamma_deg: float = 180.0
     fingers: tuple[str, ...] | str = "all"
     init: InitConfig = field(default_factory=InitConfig)
-    eval: str = "six_direction"  #: evaluation protocol name (see datagen.eval)
+    eval: str | dict = "six_direction"  #: "six_direction" or the task test mapping (see datagen.eval.tasks)
 
     def __post_init__(self):
         if len(self.w_t) != 6 or not any(abs(float(x)) > 0 for x in self.w_t):
