@@ -37,8 +37,8 @@ from datagen.objects.process import process_object
 from datagen.objects.sources import iter_source
 from datagen.synth import GraspTarget, SynthConfig, load_task, synthesize
 from datagen.synth.energies import contact_sphere_index
-from datagen.synth.squeeze import force_squeeze, normal_squeeze
-from datagen.synth.synthesize import _finger_joint_mask
+from datagen.synth.squeeze import force_squeeze, joint_squeeze, normal_squeeze
+from datagen.synth.synthesize import finger_joint_mask
 
 RESULTS = Path(__file__).parent / "results" / "squeeze.md"
 
@@ -77,11 +77,9 @@ def main() -> None:
 
     grasp_j, root = res.grasp[:, 7:], res.grasp[:, :7]
     tips = contact_sphere_index(hand)
-    movable = _finger_joint_mask(hand)
+    movable = finger_joint_mask(hand)
     modes: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
-    opening = (hand.open_pose - grasp_j).clamp(-0.1, 0.1)
-    pre = hand.apply_couplings(grasp_j + opening)
-    modes["joint (0.1 rad, baseline)"] = (pre, hand.clamp_joints(2 * grasp_j - pre))
+    modes["joint (0.1 rad, baseline)"] = joint_squeeze(hand, grasp_j, 0.1)
     modes["normal (1 cm)"] = normal_squeeze(hand, root, grasp_j, tips, res.contact_normals, 0.01, movable)
     for f in (float(x) for x in args.forces.split(",")):
         modes[f"force ({f:g} N)"] = force_squeeze(hand, root, grasp_j, tips, res.contact_points, res.contact_normals,

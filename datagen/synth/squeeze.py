@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["balanced_forces", "force_squeeze", "normal_squeeze", "tip_jacobian"]
+__all__ = ["balanced_forces", "force_squeeze", "joint_squeeze", "normal_squeeze", "pregrasp_and_squeeze", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -125,3 +125,20 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
     pre = hand.apply_couplings(2 * joints - squeeze)
     return pre, squeeze
+
+
+def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The naive construction: every joint opens by up to ``squeeze_rad`` towards the hand's open
+    pose (pregrasp) and closes as much past the grasp (squeeze). ``joints (B, J)`` radians."""
+    pre = hand.apply_couplings(joints + (hand.open_pose - joints).clamp(-squeeze_rad, squeeze_rad))
+    return pre, hand.clamp_joints(2 * joints - pre)
+
+
+def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inward_normals, movable):
+    """``(pregrasp, squeeze)`` joints by ``cfg.squeeze_mode`` (a :class:`datagen.synth.SynthConfig`)."""
+    if cfg.squeeze_mode == "force":
+        return force_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, cfg.mu, cfg.squeeze_kp,
+                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
+    if cfg.squeeze_mode == "normal":
+        return normal_squeeze(hand, root_pose, joints, tip_spheres, inward_normals, cfg.squeeze_m, movable)
+    return joint_squeeze(hand, joints, cfg.squeeze_rad)

@@ -5,10 +5,10 @@ num_per_object`` poses in one tensor program: forward kinematics, energies and t
 batched over all of them; only the distance queries loop over the distinct objects.
 
 Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/radians):
-``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``pregrasp`` the
-same root with the task fingertips moved ``cfg.squeeze_m`` out along their contact normals
-(:mod:`datagen.synth.squeeze`); ``squeeze`` = ``2 grasp - pregrasp`` (within limits), the target
-that makes position actuators press along the normals;
+``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``squeeze`` the
+same root with finger joints set so that position actuators press the task fingertips onto the
+object with balanced grip forces, and ``pregrasp`` = ``2 grasp - squeeze`` (by default; see
+``cfg.squeeze_mode`` and :mod:`datagen.synth.squeeze`);
 the task fingertips' contact points and inward normals; final energy terms; epsilon of those
 contacts; the initial pose (for rendering).
 """
@@ -23,10 +23,10 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
-from datagen.synth.squeeze import force_squeeze, normal_squeeze
+from datagen.synth.squeeze import pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
-__all__ = ["SynthesisResult", "finger_joint_groups", "synthesize"]
+__all__ = ["SynthesisResult", "finger_joint_groups", "finger_joint_mask", "synthesize"]
 
 
 @dataclass
@@ -76,7 +76,7 @@ def finger_joint_groups(hand) -> list[torch.Tensor]:
     return [torch.tensor(v, device=hand.device) for v in _joint_groups(hand).values()]
 
 
-def _finger_joint_mask(hand) -> torch.Tensor:
+def finger_joint_mask(hand) -> torch.Tensor:
     """(J,) bool: joints that belong to exactly one fingertip chain (not the wrist)."""
     mask = torch.zeros(hand.num_joints, dtype=torch.bool, device=hand.device)
     for key, idx in _joint_groups(hand).items():
@@ -133,16 +133,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         root_f = x.root_pose()
         state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m)
-        movable = _finger_joint_mask(hand)
-        if cfg.squeeze_mode == "force":
-            pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, tip_spheres, state.contact_points, state.contact_normals,
-                                        cfg.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
-        elif cfg.squeeze_mode == "normal":
-            pre_j, sq_j = normal_squeeze(hand, root_f, grasp_j, tip_spheres, state.contact_normals, cfg.squeeze_m, movable)
-        else:  # open every joint by up to squeeze_rad towards the open pose
-            opening = (hand.open_pose - grasp_j).clamp(-cfg.squeeze_rad, cfg.squeeze_rad)
-            pre_j = hand.apply_couplings(grasp_j + opening)
-            sq_j = hand.clamp_joints(2 * grasp_j - pre_j)
+        pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
+                                           state.contact_normals, finger_joint_mask(hand))
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
                          normalize=cfg.normalize, contact_model=cfg.contact_model,
                          torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))
