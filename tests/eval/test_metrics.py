@@ -27,6 +27,15 @@ def _capsule_reach(scene, data):
     return out
 
 
+def _open_hand_reach(shadow, scene, data):
+    """Open hand at the identity root: (joints, capsule reach, highest tip z, that tip point)."""
+    open_joints = np.zeros(shadow.num_joints)
+    set_static_pose(scene, data, np.concatenate([[0, 0, 0, 1, 0, 0, 0], open_joints]))
+    reach = _capsule_reach(scene, data)
+    z_top, tip = reach[max(reach, key=lambda g: reach[g][0])]
+    return open_joints, reach, z_top, tip
+
+
 @pytest.fixture(scope="module")
 def cube_scene(shadow, box_dir):
     ev = Evaluator(shadow, EvalConfig())
@@ -38,13 +47,9 @@ def cube_scene(shadow, box_dir):
 @pytest.mark.parametrize("depth", [0.0015, 0.003])
 def test_penetration_matches_analytic_depth(shadow, cube_scene, depth):
     scene, data = cube_scene
-    open_joints = np.zeros(shadow.num_joints)
-    # open hand, fingers along +z: find the capsule reaching highest, then raise the hand so that
-    # its tip enters the cube's bottom face (z = -H) by `depth`, under the face's centre
-    set_static_pose(scene, data, np.concatenate([[0, 0, 0, 1, 0, 0, 0], open_joints]))
-    reach = _capsule_reach(scene, data)
-    top = max(reach, key=lambda g: reach[g][0])
-    z_top, tip = reach[top]
+    # open hand, fingers along +z: raise the hand so that its highest capsule's tip enters the
+    # cube's bottom face (z = -H) by `depth`, under the face's centre
+    open_joints, reach, z_top, tip = _open_hand_reach(shadow, scene, data)
     second = sorted(v[0] for v in reach.values())[-2]
     assert z_top - second > depth + 1e-4  # only that fingertip overlaps: the analytic depth is unique
     shift = np.array([-tip[0], -tip[1], -H + depth - z_top])
@@ -61,11 +66,7 @@ def test_penetration_matches_analytic_depth(shadow, cube_scene, depth):
 
 def test_separated_fingertip_distance_and_normal(shadow, cube_scene):
     scene, data = cube_scene
-    open_joints = np.zeros(shadow.num_joints)
-    set_static_pose(scene, data, np.concatenate([[0, 0, 0, 1, 0, 0, 0], open_joints]))
-    reach = _capsule_reach(scene, data)
-    top = max(reach, key=lambda g: reach[g][0])
-    z_top, tip = reach[top]
+    open_joints, _, z_top, tip = _open_hand_reach(shadow, scene, data)
     gap = 0.0035
     row = np.concatenate([[-tip[0], -tip[1], -H - gap - z_top], [1, 0, 0, 0], open_joints])
     met = static_metrics(scene, data, row, touch_distance=0.002, contact_distance=0.005)
