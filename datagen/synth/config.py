@@ -59,10 +59,13 @@ class InitConfig:
     approach: tuple[float, float, float] = (0.0, 0.0, -1.0)  #: "approach": palm approach direction ("above": -z)
     thumb: tuple[float, float, float] | None = None  #: "approach": preferred thumb direction (None: random roll)
     target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm aims at, m
+    curl: float = 0.0  #: fingers start this fraction (0..1) of the way from open to flexed (a hook)
 
     def __post_init__(self):
         if self.kind not in ("surround", "above", "approach"):
             raise ConfigError(f"init.kind must be 'surround', 'above' or 'approach', got {self.kind!r}")
+        if not (isinstance(self.curl, (int, float)) and 0.0 <= self.curl <= 1.0):
+            raise ConfigError(f"init.curl must be a number in [0, 1], got {self.curl!r}")
         lo, hi = self.distance_m
         if not 0 <= lo <= hi:
             raise ConfigError(f"init.distance_m must be an increasing pair >= 0, got {self.distance_m}")

@@ -6,7 +6,9 @@ along the hull normal by ``distance_m``; the palm's approach axis points back al
 laterally by up to ``offset_m``. ``approach``: the palm faces along ``approach`` from the hull's
 supporting plane perpendicular to it, aimed at ``target_m``, thumb towards ``thumb`` (rolled by up
 to ``roll_deg``); ``above`` is ``approach`` with the palm down (-z) aimed at the origin.
-Joints start at the hand's open pose. Everything is drawn from the passed generator.
+Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
+way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
+is drawn from the passed generator.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import torch
 
 from datagen.synth.rotation import matrix_to_quat
 
-__all__ = ["initial_poses", "root_from_palm"]
+__all__ = ["curled_joints", "initial_poses", "root_from_palm"]
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
@@ -48,6 +50,34 @@ def root_from_palm(hand, origin: torch.Tensor, approach: torch.Tensor, thumb: to
     R = R_w @ R_r.T
     pos = origin - (R @ palm.origin[:, None]).squeeze(-1)
     return torch.cat([pos, matrix_to_quat(R)], dim=-1).reshape(B, 7)
+
+
+def curled_joints(hand, fraction: float, step_rad: float = 1e-3) -> torch.Tensor:
+    """(J,) the open pose with each finger's flexion joints ``fraction`` (0..1) of the way to
+    the limit that moves the fingertip out of the palm's face (along its approach axis).
+
+    A joint counts as flexion when it moves exactly one fingertip (not the wrist) and mostly
+    along the palm normal (abduction moves it sideways): found by finite differences through
+    the forward kinematics at the open pose, so it holds for any hand."""
+    ident = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
+    q0 = hand.open_pose
+    approach = _unit(hand.palm_frame(ident, q0).approach)
+    tips0 = hand.fingertip_points(ident, q0)  # (F, 3)
+    dq = step_rad * torch.eye(hand.num_joints, dtype=hand.dtype, device=hand.device)
+    motion = (hand.fingertip_points(ident, q0 + dq) - tips0) / step_rad  # (J, F, 3) m/rad
+    speed = motion.norm(dim=-1)  # (J, F)
+    along = (motion * approach).sum(-1)  # (J, F)
+    out = q0.clone()
+    for j in range(hand.num_joints):
+        moved = speed[j] > 1e-3  # > 1 mm/rad
+        if int(moved.sum()) != 1:
+            continue  # wrist (moves every tip) or a joint with no effect here
+        f = int(moved.nonzero())
+        if along[j, f].abs() < 0.5 * speed[j, f]:
+            continue  # abduction: mostly sideways
+        limit = hand.joint_upper[j] if along[j, f] > 0 else hand.joint_lower[j]
+        out[j] = q0[j] + fraction * (limit - q0[j])
+    return hand.apply_couplings(out)
 
 
 def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator: torch.Generator):
@@ -90,5 +120,6 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
         base = _any_perpendicular(approach)
     thumb = _rotate_about(base, approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
     root = root_from_palm(hand, origin, approach, thumb)
-    joints = hand.open_pose.expand(B, -1).clone()
+    open_joints = curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose
+    joints = open_joints.expand(B, -1).clone()
     return root, joints

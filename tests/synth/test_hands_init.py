@@ -44,3 +44,43 @@ def test_short_force_closure_synthesis_reaches_the_surface(name, box):
     res = synthesize(hand, [box], load_task("force_closure"), cfg, 4)
     assert res.usable(0.005).float().mean() >= 0.5, (name, res.tip_distance, res.max_penetration)
     assert torch.isfinite(res.squeeze).all() and torch.isfinite(res.pregrasp).all()
+
+
+@pytest.mark.parametrize("name", hand_params())
+def test_curled_fingers_flex_towards_the_palm_face_in_mujoco(name):
+    """``init.curl``: checked with MuJoCo's own kinematics of the hand model, every fingertip of
+    the curled hand moves out of the palm's face (along its approach axis), more for a deeper
+    curl, and sideways (abduction) joints stay at the open pose."""
+    import mujoco
+
+    from datagen.synth.init import curled_joints
+
+    hand = load_hand(name)
+    m = hand.mj_model
+    d = mujoco.MjData(m)
+    tip_bodies = [m.body(hand.link_names[i]).id for i in hand.fingertip_link_index.tolist()]
+    palm_body = m.body(hand.link_names[hand.palm_link]).id
+
+    def tips_along_palm_normal(joints):
+        d.qpos[:] = hand.joints_to_qpos(joints)
+        mujoco.mj_kinematics(m, d)
+        normal = d.xmat[palm_body].reshape(3, 3) @ hand.palm_local[1].cpu().numpy()
+        return d.xpos[tip_bodies] @ (normal / np.linalg.norm(normal))
+
+    open_ = tips_along_palm_normal(hand.open_pose)
+    half, deep = (tips_along_palm_normal(curled_joints(hand, f)) for f in (0.3, 0.6))
+    assert (half - open_ > 0.01).all(), (name, half - open_)  # every tip at least 1 cm out of the palm's face
+    assert (deep - half > 0.0).all(), (name, deep - half)
+    q = curled_joints(hand, 0.6)
+    assert torch.all(q <= hand.joint_upper + 1e-9) and torch.all(q >= hand.joint_lower - 1e-9)
+    if name == "shadow":  # abduction joints (side-to-side) are not flexion
+        for j in ("robot0:FFJ3", "robot0:MFJ3", "robot0:RFJ3", "robot0:LFJ3"):
+            assert float(q[m.joint(j).id]) == pytest.approx(float(hand.open_pose[m.joint(j).id]))
+    assert torch.equal(curled_joints(hand, 0.0), hand.apply_couplings(hand.open_pose))
+
+
+def test_curl_outside_zero_one_is_a_config_error():
+    from datagen.synth.config import ConfigError
+
+    with pytest.raises(ConfigError, match="init.curl"):
+        TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "curl": 1.5}})
