@@ -133,14 +133,20 @@ def stressed_config(task_name: str, k: float):
 
 
 def code_version() -> str:
-    """``git describe --always --dirty`` of this checkout, or $DATAGEN_CODE_VERSION (e.g. in an export)."""
+    """``git describe --always`` of this checkout, ``-dirty`` when files other than the benchmark
+    results (which this script rewrites) differ from it; or $DATAGEN_CODE_VERSION (e.g. in an export)."""
     import subprocess
 
     if os.environ.get("DATAGEN_CODE_VERSION"):
         return os.environ["DATAGEN_CODE_VERSION"]
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=Path(__file__).parent, text=True, capture_output=True,
+                              check=True).stdout.strip()
+
     try:
-        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=Path(__file__).parent, text=True,
-                              capture_output=True, check=True).stdout.strip()
+        changed = git("status", "--porcelain", "--untracked-files=no", "--", ":/", ":(exclude,top)benchmarks/results")
+        return git("describe", "--always") + ("-dirty" if changed else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
