@@ -328,6 +328,18 @@ def _render_version(recs: list[dict]) -> list[str]:
     return lines
 
 
+NOTES_HEADING = "## Notes (hand-written"
+
+
+def write_report(out: Path, text: str) -> None:
+    """Write the generated report to ``out``, keeping the hand-written notes section (from
+    ``NOTES_HEADING`` to the end) of the file already there."""
+    old = out.read_text() if out.exists() else ""
+    at = old.find(NOTES_HEADING)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text.rstrip("\n") + "\n" + ("\n" + old[at:] if at >= 0 else ""))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tasks", default=",".join(TASKS), help="comma-separated task names")
@@ -372,10 +384,8 @@ def main():
                     path.write_text(json.dumps(rec, indent=1))
                     print(f"{hname} {v} {t}: {100 * rec['success']:.0f}% synth {rec['synth_s']:.1f}s eval "
                           f"{rec['eval_s']:.1f}s peak {rec['peak_mb']:.0f}MB {rec['reasons']}", flush=True)
-                    args.out.parent.mkdir(parents=True, exist_ok=True)
-                    args.out.write_text(render(args.records, machine))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(render(args.records, machine))
+                    write_report(args.out, render(args.records, machine))
+    write_report(args.out, render(args.records, machine))
     print(f"wrote {args.out}")
 
 
