@@ -58,12 +58,15 @@ class InitConfig:
     offset_m: float = 0.01  #: lateral jitter of the palm origin, +-
     approach: tuple[float, float, float] = (0.0, 0.0, -1.0)  #: "approach": palm approach direction ("above": -z)
     thumb: tuple[float, float, float] | None = None  #: "approach": preferred thumb direction (None: random roll)
-    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm aims at, m
+    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm (or the fingertips, see aim) aims at, m
     curl: float = 0.0  #: fingers start this fraction (0..1) of the way from open to flexed (a hook)
+    aim: str = "palm"  #: "approach": what lands on target_m, "palm" (palm origin) or "fingertips" (task tips' centre)
 
     def __post_init__(self):
         if self.kind not in ("surround", "above", "approach"):
             raise ConfigError(f"init.kind must be 'surround', 'above' or 'approach', got {self.kind!r}")
+        if self.aim not in ("palm", "fingertips"):
+            raise ConfigError(f"init.aim must be 'palm' or 'fingertips', got {self.aim!r}")
         if not (isinstance(self.curl, (int, float)) and 0.0 <= self.curl <= 1.0):
             raise ConfigError(f"init.curl must be a number in [0, 1], got {self.curl!r}")
         lo, hi = self.distance_m

@@ -5,7 +5,12 @@ along the hull normal by ``distance_m``; the palm's approach axis points back al
 (tilted by up to ``tilt_deg``), rolled by up to ``roll_deg`` about it, origin jittered
 laterally by up to ``offset_m``. ``approach``: the palm faces along ``approach`` from the hull's
 supporting plane perpendicular to it, aimed at ``target_m``, thumb towards ``thumb`` (rolled by up
-to ``roll_deg``); ``above`` is ``approach`` with the palm down (-z) aimed at the origin.
+to ``roll_deg``); ``above`` is ``approach`` with the palm down (-z) aimed at the origin. With ``aim:
+fingertips`` (``approach`` only) it is not the palm but the centre of the task's fingertips (the
+midpoint of the two farthest apart, at the initial joints) that lands on ``target_m``, backed off
+by ``distance_m`` against the approach: a precision grasp's fingertips start around the part
+they pinch, wherever the hand's palm frame lies; there ``thumb`` gives the direction from the other
+task fingertips to the thumb tip (the pinch axis), not the palm's thumb axis.
 Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
 way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
 is drawn from the passed generator.
@@ -19,7 +24,7 @@ import torch
 
 from datagen.synth.rotation import matrix_to_quat
 
-__all__ = ["curled_joints", "initial_poses", "root_from_palm"]
+__all__ = ["curled_joints", "fingertip_centre", "initial_poses", "root_from_palm"]
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
@@ -38,16 +43,27 @@ def _rotate_about(v: torch.Tensor, axis: torch.Tensor, angle: torch.Tensor) -> t
     return v * c + torch.linalg.cross(axis, v) * s + axis * (axis * v).sum(-1, keepdim=True) * (1 - c)
 
 
-def root_from_palm(hand, origin: torch.Tensor, approach: torch.Tensor, thumb: torch.Tensor) -> torch.Tensor:
-    """Root poses ``(B, 7)`` placing the open hand's palm frame at world ``origin``/axes ``(B, 3)``."""
+def _frame(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """(..., 3, 3) rotation with columns u, v made orthogonal to u, u x v (unit)."""
+    u = _unit(u)
+    v = _unit(v - (v * u).sum(-1, keepdim=True) * u)
+    return torch.stack([u, v, torch.linalg.cross(u, v)], dim=-1)
+
+
+def root_from_palm(hand, origin: torch.Tensor, approach: torch.Tensor, thumb: torch.Tensor,
+                   pinch: torch.Tensor | None = None) -> torch.Tensor:
+    """Root poses ``(B, 7)`` placing the open hand's palm frame at world ``origin``/axes ``(B, 3)``.
+
+    With ``pinch`` (3,), a vector in the hand's root frame (the thumb tip minus the other task
+    tips), that vector is turned exactly onto ``thumb`` and the palm's approach axis as close
+    to ``approach`` as that leaves it."""
     B = origin.shape[0]
     ident = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
     palm = hand.palm_frame(ident, hand.open_pose)
-    a_r, t_r = _unit(palm.approach), _unit(palm.thumb)
-    R_r = torch.stack([a_r, t_r, torch.linalg.cross(a_r, t_r)], dim=-1)  # (3, 3) columns
-    a_w, t_w = _unit(approach), _unit(thumb - (thumb * _unit(approach)).sum(-1, keepdim=True) * _unit(approach))
-    R_w = torch.stack([a_w, t_w, torch.linalg.cross(a_w, t_w)], dim=-1)  # (B, 3, 3)
-    R = R_w @ R_r.T
+    if pinch is None:
+        R = _frame(approach, thumb) @ _frame(palm.approach, palm.thumb).T
+    else:
+        R = _frame(thumb, approach) @ _frame(pinch, palm.approach).T
     pos = origin - (R @ palm.origin[:, None]).squeeze(-1)
     return torch.cat([pos, matrix_to_quat(R)], dim=-1).reshape(B, 7)
 
@@ -80,8 +96,36 @@ def curled_joints(hand, fraction: float, step_rad: float = 1e-3) -> torch.Tensor
     return hand.apply_couplings(out)
 
 
-def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator: torch.Generator):
-    """``(root_pose (B, 7), joints (B, J))`` for grasps on ``targets[object_index]``."""
+def fingertip_centre(hand, root: torch.Tensor, joints: torch.Tensor, tip_index) -> torch.Tensor:
+    """(B, 3) midpoint of the two farthest apart fingertips ``tip_index`` (all when None), m."""
+    tips = hand.fingertip_points(root, joints)  # (B, F, 3)
+    if tip_index is not None:
+        tips = tips[:, list(tip_index)]
+    if tips.shape[1] == 1:
+        return tips[:, 0]
+    gap = (tips[:, :, None] - tips[:, None]).norm(dim=-1).flatten(1)  # (B, F*F)
+    i, j = gap.argmax(-1).div(tips.shape[1], rounding_mode="floor"), gap.argmax(-1) % tips.shape[1]
+    rows = torch.arange(tips.shape[0], device=tips.device)
+    return 0.5 * (tips[rows, i] + tips[rows, j])
+
+
+def _pinch_vector(hand, joints: torch.Tensor, tip_index) -> torch.Tensor | None:
+    """(3,) thumb tip minus the mean of the other task tips, root frame, at ``joints`` (J,);
+    None without a thumb and another finger among the task's tips."""
+    names = hand.fingertip_names
+    tips = list(range(len(names))) if tip_index is None else list(tip_index)
+    if "th" not in names or names.index("th") not in tips or len(tips) < 2:
+        return None
+    ident = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
+    pts = hand.fingertip_points(ident, joints)
+    th = names.index("th")
+    return pts[th] - pts[[i for i in tips if i != th]].mean(0)
+
+
+def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator: torch.Generator,
+                  tip_index=None):
+    """``(root_pose (B, 7), joints (B, J))`` for grasps on ``targets[object_index]``;
+    ``tip_index``: the task's fingertips (for ``aim: fingertips``; None: all)."""
     B = object_index.shape[0]
     dt, dev = hand.dtype, hand.device
 
@@ -103,6 +147,8 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
             n = _unit(a)
             target_pt = torch.tensor(init_cfg.target_m if init_cfg.kind == "approach" else (0, 0, 0.0), dtype=dt, device=dev)
             reach = ((target.hull_points.to(dev, dt) - target_pt) @ n).max()
+            if init_cfg.kind == "approach" and init_cfg.aim == "fingertips":
+                reach = reach * 0  # the fingertips go to the target itself, not to the hull's plane
             origin[sel] = (target_pt + n * reach).expand(sel.numel(), 3)
             normal[sel] = n.expand(sel.numel(), 3)
     lo, hi = init_cfg.distance_m
@@ -113,13 +159,18 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
     approach = -normal
     tilt_axis = _rotate_about(_any_perpendicular(approach), approach, 2 * math.pi * rand(B))
     approach = _rotate_about(approach, tilt_axis, math.radians(init_cfg.tilt_deg) * (2 * rand(B) - 1))
+    open_joints = curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose
+    fingertips = init_cfg.kind == "approach" and init_cfg.aim == "fingertips"
     if init_cfg.kind == "approach" and init_cfg.thumb is not None:
         hint = torch.tensor(init_cfg.thumb, dtype=dt, device=dev).expand(B, 3)
         base = _unit(hint - (hint * approach).sum(-1, keepdim=True) * approach)
+        pinch = _pinch_vector(hand, open_joints, tip_index) if fingertips else None
     else:
-        base = _any_perpendicular(approach)
+        base, pinch = _any_perpendicular(approach), None
     thumb = _rotate_about(base, approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
-    root = root_from_palm(hand, origin, approach, thumb)
-    open_joints = curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose
+    root = root_from_palm(hand, origin, approach, thumb, pinch)
     joints = open_joints.expand(B, -1).clone()
+    if fingertips:
+        shift = origin - fingertip_centre(hand, root, joints, tip_index)
+        root = torch.cat([root[:, :3] + shift, root[:, 3:]], -1)
     return root, joints

@@ -107,7 +107,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)
     finger_index = _resolve_fingers(hand, task)
     tip_spheres = contact_sphere_index(hand)[finger_index]
-    root, joints = initial_poses(hand, targets, object_index, task.init, gen)
+    root, joints = initial_poses(hand, targets, object_index, task.init, gen, tip_index=finger_index)
     joints = hand.apply_couplings(joints)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
 

@@ -84,3 +84,51 @@ def test_curl_outside_zero_one_is_a_config_error():
 
     with pytest.raises(ConfigError, match="init.curl"):
         TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "curl": 1.5}})
+
+
+@pytest.mark.parametrize("name", hand_params())
+def test_aim_fingertips_puts_the_pinch_on_the_target_in_mujoco(name, box):
+    """``init.aim: fingertips`` with a ``thumb`` hint: checked with MuJoCo's own kinematics of the
+    hand model, the midpoint of the two farthest apart task fingertips lands ``distance_m`` above
+    ``target_m`` (against the approach), the thumb-to-fingers pinch vector points along the hint,
+    and the palm's normal leans only within the plane of the approach and the hint."""
+    import mujoco
+
+    hand = load_hand(name)
+    m = hand.mj_model
+    d = mujoco.MjData(m)
+    fingers = [hand.fingertip_names.index(f) for f in ("th", "ff", "mf")]
+    target = np.array([0.01, -0.02, 0.005])
+    spec = TaskSpec.from_dict({"name": "t", "init": {
+        "kind": "approach", "approach": [0, 0, -1], "thumb": [0, 1, 0], "roll_deg": 0, "tilt_deg": 0,
+        "offset_m": 0, "aim": "fingertips", "curl": 0.3, "distance_m": [0.01, 0.01], "target_m": target.tolist()}}).init
+    root, joints = initial_poses(hand, [box], torch.zeros(2, dtype=torch.long), spec, torch.Generator().manual_seed(0),
+                                 tip_index=fingers)
+    root, joints = root[0].double().numpy(), joints[0]
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, root[3:7] / np.linalg.norm(root[3:7]))
+    R = R.reshape(3, 3)
+    d.qpos[:] = hand.joints_to_qpos(joints)
+    mujoco.mj_kinematics(m, d)
+    local = hand.fingertip_points_local.double().numpy()
+    tips = []
+    for f in fingers:
+        b = m.body(hand.link_names[int(hand.fingertip_link_index[f])]).id
+        tips.append(R @ (d.xpos[b] + d.xmat[b].reshape(3, 3) @ local[f]) + root[:3])
+    tips = np.array(tips)
+    gaps = np.linalg.norm(tips[:, None] - tips[None], axis=-1)
+    i, j = np.unravel_index(gaps.argmax(), gaps.shape)
+    np.testing.assert_allclose(0.5 * (tips[i] + tips[j]), target + [0, 0, 0.01], atol=1e-4)
+    pinch = tips[0] - tips[1:].mean(0)
+    assert pinch[1] / np.linalg.norm(pinch) > 0.999, (name, pinch)
+    palm_body = m.body(hand.link_names[hand.palm_link]).id
+    normal = R @ d.xmat[palm_body].reshape(3, 3) @ hand.palm_local[1].double().numpy()
+    normal /= np.linalg.norm(normal)
+    assert abs(normal[0]) < 1e-3 and normal[2] < -0.3, (name, normal)
+
+
+def test_aim_must_be_palm_or_fingertips():
+    from datagen.synth.config import ConfigError
+
+    with pytest.raises(ConfigError, match="init.aim"):
+        TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "aim": "tips"}})
