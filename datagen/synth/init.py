@@ -146,9 +146,10 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
             a = -1.0 * torch.tensor(init_cfg.approach if init_cfg.kind == "approach" else (0, 0, -1.0), dtype=dt, device=dev)
             n = _unit(a)
             target_pt = torch.tensor(init_cfg.target_m if init_cfg.kind == "approach" else (0, 0, 0.0), dtype=dt, device=dev)
-            reach = ((target.hull_points.to(dev, dt) - target_pt) @ n).max()
             if init_cfg.kind == "approach" and init_cfg.aim == "fingertips":
-                reach = reach * 0  # the fingertips go to the target itself, not to the hull's plane
+                reach = 0.0  # the fingertips go to the target itself, not to the hull's plane
+            else:
+                reach = ((target.hull_points.to(dev, dt) - target_pt) @ n).max()
             origin[sel] = (target_pt + n * reach).expand(sel.numel(), 3)
             normal[sel] = n.expand(sel.numel(), 3)
     lo, hi = init_cfg.distance_m
