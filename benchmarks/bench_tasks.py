@@ -234,6 +234,8 @@ def task_definitions() -> list[str]:
                     f"from the {test.measure_from} pose")
         j = obj.joint
         joint = j.kind if j.kind == "free" else f"{j.kind} {list(j.axis)} @ {list(j.anchor_m)}"
+        if j.limits is not None:
+            joint += ", stops " + " / ".join("none" if x is None else f"{x:+g}" for x in j.limits)
         out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
                    f"{', '.join(spec.fingers)} | {list(spec.init.approach)} / {list(spec.init.target_m)} | {dist} |")
     return out

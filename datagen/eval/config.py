@@ -61,7 +61,8 @@ class TaskTest:
     torque part by ``torque_nm`` N m, or if that is None by the force times ``torque_arm``
     object scales (a torque of F * arm * scale N m). The object moves on ``joint``: ``free``
     (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor``) or ``slide`` (prismatic
-    along ``axis``); ``anchor`` is in metres. Success: the object stays within
+    along ``axis``); ``anchor`` is in metres; ``limits``: the joint's end stops from the initial
+    pose, ``(lower, upper)`` metres or radians, None for a free side (None: no end stops). Success: the object stays within
     ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s), measured from the
     object's initial pose (``measure_from: initial``, as the six-direction protocol) or from its
     pose once the hand has closed (``closed``: only the disturbance's effect counts, as in the
@@ -73,6 +74,7 @@ class TaskTest:
     joint: str = "free"
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     anchor: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    limits: tuple[float | None, float | None] | None = None
     force_n: float | None = None
     torque_arm: float = 1.0
     torque_nm: float | None = None
@@ -92,6 +94,14 @@ class TaskTest:
         a = tuple(float(x) for x in self.anchor)
         _check(len(a) == 3 and all(math.isfinite(x) for x in a), "TaskTest.anchor", "must be 3 finite numbers")
         object.__setattr__(self, "anchor", a)
+        if self.limits is not None:
+            ok = isinstance(self.limits, (tuple, list)) and len(self.limits) == 2 and self.joint != "free"
+            lim = tuple(None if x is None else float(x) for x in self.limits) if ok else ()
+            ok = ok and all(x is None or math.isfinite(x) for x in lim) \
+                and (lim[0] is None or lim[0] <= 0) and (lim[1] is None or lim[1] >= 0) and lim != (None, None)
+            _check(ok, "TaskTest.limits", "must be (lower <= 0, upper >= 0) of a hinge or slide joint, "
+                   f"null for a side without an end stop; got {self.limits!r} on a {self.joint!r} joint")
+            object.__setattr__(self, "limits", lim)
         _check(self.force_n is None or self.force_n > 0, "TaskTest.force_n", "must be > 0 or null")
         _check(self.torque_arm >= 0, "TaskTest.torque_arm", "must be >= 0")
         for name in ("torque_nm", "max_translation_m", "max_rotation_deg"):

@@ -116,7 +116,7 @@ class Evaluator:
     # ------------------------------------------------------------------ scenes
     def scene(self, pieces: ObjectPieces, task: TaskTest | None = None) -> tuple[Scene, list[mujoco.MjData]]:
         """The cached scene of ``pieces`` (object joint from ``task``) and its scratch MjData."""
-        joint = None if task is None or task.joint == "free" else (task.joint, task.axis, task.anchor)
+        joint = None if task is None or task.joint == "free" else (task.joint, task.axis, task.anchor, task.limits)
         key = (pieces.paths, pieces.volumes, pieces.scale, joint)
         if key in self._scenes:
             self._scenes.move_to_end(key)

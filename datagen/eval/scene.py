@@ -5,7 +5,7 @@ under ``hand_base``, a body with a free joint welded to the mocap body ``hand_mo
 is driven by moving the mocap body and by its position actuators (gains set from the config).
 The object is one body of the convex pieces at ``scale`` metres per normalized unit, total
 mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
-hinge/slide joint of a task. Every geom gets the config's condim, friction and margin; hand
+hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's condim, friction and margin; hand
 geoms get the hand solimp/solref.
 """
 
@@ -25,6 +25,7 @@ HAND_PREFIX = "hand/"
 _INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "rk4": mujoco.mjtIntegrator.mjINT_RK4,
                 "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
                 "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST}
+_NO_STOP = 1e3  # m or rad: the range bound of a joint side without an end stop
 _CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
 
 
@@ -160,8 +161,12 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         body.add_freejoint(name="object_joint")
     else:
         kind = mujoco.mjtJoint.mjJNT_HINGE if task.joint == "hinge" else mujoco.mjtJoint.mjJNT_SLIDE
-        body.add_joint(name="object_joint", type=kind, axis=list(task.axis), pos=list(task.anchor),
-                       damping=0.0, armature=0.0)
+        j = body.add_joint(name="object_joint", type=kind, axis=list(task.axis), pos=list(task.anchor),
+                           damping=0.0, armature=0.0)
+        if task.limits is not None:  # a free side: a stop far beyond any pass threshold
+            j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+            j.range = [-_NO_STOP if task.limits[0] is None else task.limits[0],
+                       _NO_STOP if task.limits[1] is None else task.limits[1]]
     total = sum(pieces.volumes)
     s = pieces.scale
     for i, (path, vol) in enumerate(zip(pieces.paths, pieces.volumes)):

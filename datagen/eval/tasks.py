@@ -71,7 +71,8 @@ def task_test_from_spec(spec, where: str | None = None) -> TaskTest | None:
     joint = task_objects.build(name).joint
     kw = {k: block[k] for k in EVAL_KEYS[2:] if k in block and block[k] is not None}
     try:
-        return TaskTest(w_t=tuple(spec.w_t), joint=joint.kind, axis=joint.axis, anchor=joint.anchor_m, **kw)
+        return TaskTest(w_t=tuple(spec.w_t), joint=joint.kind, axis=joint.axis, anchor=joint.anchor_m,
+                        limits=joint.limits, **kw)
     except EvalError as exc:
         raise EvalError(f"{where}: eval ({exc.thing})", exc.reason, exc.remedy) from None
 

@@ -39,11 +39,15 @@ class VirtualJoint:
     """The DoF of a task object in its (bbox-centred) frame.
 
     ``kind``: ``free`` (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor_m``) or
-    ``slide`` (prismatic along ``axis``); ``axis`` unit (3,), ``anchor_m`` (3,) metres."""
+    ``slide`` (prismatic along ``axis``); ``axis`` unit (3,), ``anchor_m`` (3,) metres.
+    ``limits``: the joint's travel from the initial pose, ``(lower, upper)`` in metres (slide) or
+    radians (hinge), None on a side without an end stop (e.g. a push button's cap bottoms out
+    in its housing but nothing holds it down); None: no end stops."""
 
     kind: str
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     anchor_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    limits: tuple[float | None, float | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -137,10 +141,11 @@ def _plate():
 
 
 def _button():
-    """Push button cap: r 11 mm, 12 mm tall, on a 14 mm collar; pressed along -z (base not modelled)."""
+    """Push button cap: r 11 mm, 12 mm tall, on a 14 mm collar; pressed along -z, 4 mm of travel
+    to its end stop (the housing's floor; the housing's walls are not modelled)."""
     parts = [_cyl(0.014, 0.0, 0.003), _cyl(0.011, 0.002, 0.011), _cyl(0.009, 0.010, 0.012)]
-    return parts, VirtualJoint("slide", (0, 0, 1), (0, 0, 0)), {"top": (0, 0, 0.012)}, \
-        "push button cap (its housing not modelled)"
+    return parts, VirtualJoint("slide", (0, 0, 1), (0, 0, 0), limits=(-0.004, None)), {"top": (0, 0, 0.012)}, \
+        "push button cap, 4 mm travel (its housing's walls not modelled)"
 
 
 def _drawer():
@@ -216,7 +221,7 @@ def build(name: str) -> TaskObject:
     mesh = trimesh.Trimesh(v - centre, f, process=False)
     cparts = tuple((pv - centre, pf) for pv, pf in (_mesh_arrays(p) for p in parts))
     scale = float(np.linalg.norm(hi - lo) / 2)
-    jnt = VirtualJoint(joint.kind, tuple(float(x) for x in joint.axis), shift(joint.anchor_m))
+    jnt = VirtualJoint(joint.kind, tuple(float(x) for x in joint.axis), shift(joint.anchor_m), joint.limits)
     return TaskObject(name, mesh, cparts, jnt, scale, {k: shift(p) for k, p in points.items()}, desc)
 
 

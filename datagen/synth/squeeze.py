@@ -13,13 +13,19 @@ The joint displacement is the damped least-squares solution ``dq = J^T (J J^T + 
 of the fingertips' positional Jacobian ``J (3F, J)`` (joints shared by several fingertips, e.g.
 the wrist, are held fixed), ``e (3F,)`` the wanted fingertip displacements: a first-order step,
 exact to O(distance^2).
+
+Opening the fingertips along their normals can swing another link of the same finger into the
+object (a hooked finger's proximal phalanx into a bag's strap): a simulated grasp starting there
+is kicked off the hand before it closes. :func:`backtrack_pregrasp` pulls such a pregrasp back
+towards the grasp until no collision sphere sinks deeper than at the grasp.
 """
 
 from __future__ import annotations
 
 import torch
 
-__all__ = ["balanced_forces", "force_squeeze", "joint_squeeze", "normal_squeeze", "pregrasp_and_squeeze", "tip_jacobian"]
+__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "joint_squeeze", "normal_squeeze",
+           "pregrasp_and_squeeze", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -109,15 +115,18 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
 
     Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
     ``tau = kp dq = J^T f``: the squeeze ``grasp + J^T f / kp`` presses each fingertip on the
-    object with the :func:`balanced_forces` ``f``, scaled so the largest is ``force_n`` newtons,
-    plus the fingertip motion that closes ``approach_m`` along the normal (the gap between the
+    object with the :func:`balanced_forces` ``f``, scaled so the largest is ``force_n`` newtons
+    times the set's balance ``1 - |sum f| / sum |f|`` (1: the forces cancel, a pure grip; 0: they
+    all push one way, as fingers under a plate or hooked in a strap, and a squeeze would only
+    push the object out of the hand, so none is added), plus the fingertip motion that closes ``approach_m`` along the normal (the gap between the
     collision spheres and the hand's real geometry). The pregrasp is the mirror image
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
     """
     B, F = points.shape[:2]
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
     f = balanced_forces(points, inward_normals, mu)
-    f = f * (force_n / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    balance = (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)  # (B,)
+    f = f * (force_n * balance / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
     dq_force = (J.transpose(1, 2) @ f.reshape(B, 3 * F, 1)).squeeze(-1) / kp
     e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
     eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
@@ -142,3 +151,25 @@ def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inwa
     if cfg.squeeze_mode == "normal":
         return normal_squeeze(hand, root_pose, joints, tip_spheres, inward_normals, cfg.squeeze_m, movable)
     return joint_squeeze(hand, joints, cfg.squeeze_rad)
+
+
+def backtrack_pregrasp(hand, grasp: torch.Tensor, pregrasp: torch.Tensor, depth_fn, slack_m: float = 5e-4,
+                       halvings: int = 4) -> torch.Tensor:
+    """``(B, J)`` pregrasp joints no deeper in the object than the grasp.
+
+    ``depth_fn(joints (B, J)) -> (B,)`` is the deepest collision-sphere penetration (m) of the
+    hand at those joints (root fixed). On rows where the pregrasp is deeper than the grasp by
+    more than ``slack_m``, the step ``pregrasp - grasp`` is halved, up to ``halvings`` times;
+    rows still too deep get the grasp itself (the hand closes from there: no approach motion).
+    """
+    limit = depth_fn(grasp) + slack_m
+    alpha = torch.ones(grasp.shape[0], 1, dtype=grasp.dtype, device=grasp.device)
+    step = pregrasp - grasp
+    for _ in range(halvings + 1):
+        bad = depth_fn(hand.apply_couplings(grasp + alpha * step)) > limit
+        if not bool(bad.any()):
+            break
+        alpha = torch.where(bad[:, None], alpha * 0.5, alpha)
+    else:
+        alpha = torch.where(bad[:, None], torch.zeros_like(alpha), alpha)
+    return hand.apply_couplings(grasp + alpha * step)

@@ -8,7 +8,8 @@ Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/
 ``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``squeeze`` the
 same root with finger joints set so that position actuators press the task fingertips onto the
 object with balanced grip forces, and ``pregrasp`` = ``2 grasp - squeeze`` (by default; see
-``cfg.squeeze_mode`` and :mod:`datagen.synth.squeeze`);
+``cfg.squeeze_mode`` and :mod:`datagen.synth.squeeze`), pulled back towards the grasp where it
+would sink the hand deeper into the object than the grasp does;
 the task fingertips' contact points and inward normals; final energy terms; epsilon of those
 contacts; the initial pose (for rendering).
 """
@@ -23,7 +24,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
-from datagen.synth.squeeze import pregrasp_and_squeeze
+from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
 __all__ = ["SynthesisResult", "finger_joint_groups", "finger_joint_mask", "synthesize"]
@@ -135,6 +136,12 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
                                   sphere_margin=cfg.sphere_margin_m)
         pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
                                            state.contact_normals, finger_joint_mask(hand))
+
+        def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
+            return hand_object_state(hand, targets, object_index, root_f, j, tip_spheres,
+                                     self_collision=False).max_penetration
+
+        pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
                          normalize=cfg.normalize, contact_model=cfg.contact_model,
                          torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))

@@ -5,7 +5,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from datagen.eval import EvalConfig, EvalError
+from datagen.eval import EvalConfig, EvalError, TaskTest
 from datagen.eval.scene import build_scene, pieces_from_processed
 from datagen.eval.tasks import task_object, task_test_from_spec
 from datagen.objects import task_objects as T
@@ -83,6 +83,34 @@ def _write(tmp_path, eval_block: str, extra: str = "") -> str:
     path.write_text("name: bad\nw_t: [0, 0, 0, 0, 0, 1]\ngamma_deg: 15\nfingers: [th, ff]\n" + extra
                     + "eval:\n" + eval_block)
     return str(path)
+
+
+def test_mujoco_button_cap_bottoms_out_at_its_end_stop_and_rises_freely(shadow, tmp_path):
+    test = EvalConfig().task_test("push_button")
+    assert test.limits == (-0.004, None)
+    ref = resolve("tasks", "button", T.object_id("button"))
+    scene = build_scene(shadow, pieces_from_processed(process_object(ref, root=tmp_path), T.build("button").scale_m),
+                        EvalConfig(), test)
+    m = scene.model
+    j = m.joint("object_joint").id
+    assert m.jnt_limited[j] and m.jnt_range[j][0] == pytest.approx(-0.004)
+    # physics, hand parked 1 m away: pushed down 2 s by 1 N, the cap stops 4 mm down (the
+    # constraint's softness aside); pushed up, it passes any pass threshold (no stop above)
+    for force, check in ((-1.0, lambda z: -0.0045 < z < -0.0038), (1.0, lambda z: z > 0.05)):
+        d = mujoco.MjData(m)
+        d.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = [0, 0, 1.0]
+        d.mocap_pos[scene.mocap] = [0, 0, 1.0]
+        d.xfrc_applied[scene.object_body, 2] = force
+        mujoco.mj_step(m, d, nstep=500)
+        assert check(float(d.qpos[m.jnt_qposadr[j]])), (force, float(d.qpos[m.jnt_qposadr[j]]))
+
+
+@pytest.mark.parametrize("limits", [(0.01, None), (None, None), (None, -0.1), (0.0,), (float("nan"), 0.0)])
+def test_bad_joint_limits_name_the_field(limits):
+    with pytest.raises(EvalError, match="limits"):
+        TaskTest(w_t=(0, 0, 1, 0, 0, 0), joint="slide", limits=limits)
+    with pytest.raises(EvalError, match="limits"):
+        TaskTest(w_t=(0, 0, 1, 0, 0, 0), joint="free", limits=(-0.01, 0.01))
 
 
 @pytest.mark.parametrize("block, field", [

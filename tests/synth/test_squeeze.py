@@ -7,7 +7,7 @@ from scipy.optimize import linprog
 
 from datagen.hands import load_hand
 from datagen.synth.energies import contact_sphere_index
-from datagen.synth.squeeze import balanced_forces, force_squeeze, normal_squeeze
+from datagen.synth.squeeze import backtrack_pregrasp, balanced_forces, force_squeeze, normal_squeeze
 
 
 @pytest.fixture(scope="module")
@@ -119,3 +119,43 @@ def test_force_squeeze_is_the_statics_of_position_actuators(hand):
             checked += 1
     assert checked > 10
     assert torch.allclose(pre, hand64.apply_couplings(2 * joints - sq))
+
+
+def test_force_squeeze_adds_no_force_when_the_contacts_all_push_one_way(hand):
+    # fingertips under a plate, every inward normal +z: no forces cancel, so a squeeze would only
+    # push a free object away; it reduces to the gap-closing motion (force 0). The same fingertips
+    # with normals towards their centroid (a grip) get the full squeeze.
+    B = 2
+    root = torch.tensor([0, 0, 0, 1.0, 0, 0, 0]).expand(B, 7)
+    joints = hand.apply_couplings((0.5 * (hand.joint_lower + hand.joint_upper)).expand(B, -1))
+    spheres = contact_sphere_index(hand)[:3]
+    tips = _tips(hand, root, joints, spheres)
+    movable = torch.ones(hand.num_joints, dtype=torch.bool)
+    up = torch.tensor([0, 0, 1.0]).expand(B, 3, 3)
+    args = (hand, root, joints, spheres, tips)
+    _, sq_up = force_squeeze(*args, up, 0.5, 5.0, 10.0, 0.002, movable)
+    _, sq_gap = force_squeeze(*args, up, 0.5, 5.0, 0.0, 0.002, movable)
+    assert torch.allclose(sq_up, sq_gap, atol=1e-6)
+    grip = torch.nn.functional.normalize(tips.mean(1, keepdim=True) - tips, dim=-1)
+    _, sq_grip = force_squeeze(*args, grip, 0.5, 5.0, 10.0, 0.002, movable)
+    _, sq_grip0 = force_squeeze(*args, grip, 0.5, 5.0, 0.0, 0.002, movable)
+    assert (sq_grip - sq_grip0).abs().amax() > 0.05  # 10 N at kp 5 N m/rad: tenths of a radian
+
+
+def test_backtrack_pregrasp_halves_the_opening_until_no_deeper_than_the_grasp(hand):
+    # a hand-computed case: the "object" is entered once joint k opens past 30% of the step
+    k = 3
+    grasp = hand.apply_couplings((0.5 * (hand.joint_lower + hand.joint_upper)).expand(3, -1).clone())
+    step = torch.zeros_like(grasp)
+    step[:, k] = torch.tensor([0.1, 0.1, 0.0]) * torch.sign(hand.joint_upper[k] - grasp[0, k])
+    pre = grasp + step
+    blocked = torch.tensor([False, True, False])  # row 1: deep at any opening, however small
+
+    def depth(j):
+        opening = (j[:, k] - grasp[:, k]).abs()
+        return torch.where(blocked, 0.01 * (opening > 0), (opening - 0.03).clamp_min(0.0))
+
+    out = backtrack_pregrasp(hand, grasp, pre, depth, slack_m=5e-4, halvings=4)
+    assert float((out[0, k] - grasp[0, k]).abs()) == pytest.approx(0.025, abs=1e-6)  # 1 -> 0.5 -> 0.25 of 0.1 rad
+    assert torch.equal(out[1], grasp[1])  # never clear: the grasp itself
+    assert torch.equal(out[2], pre[2])  # nothing to do
