@@ -153,6 +153,7 @@ class EvalConfig:
     # --- hand control: every position actuator gets this gain and force limit ---
     actuator_kp: float = 5.0                       # the gymnasium-robotics Shadow has kp 1
     actuator_force_limit: float = 3.0              # N or N m, symmetric
+    actuator_time_constant_s: float = 0.1          # actuator damping kv <= kp * this (Shadow: kv 0)
     weld_solref: tuple[float, float] = (0.02, 1.0)  # mocap-to-hand-root weld (MuJoCo default)
     # --- object ---
     object_mass_kg: float = 0.1                    # split over the pieces by volume
@@ -199,7 +200,7 @@ class EvalConfig:
         _check(self.condim in (1, 3, 4, 6), f"{c}.condim", "must be 1, 3, 4 or 6")
         _check(len(self.friction) == 2 and min(self.friction) >= 0, f"{c}.friction", "two values >= 0")
         _check(len(self.hand_solimp) == 3 and len(self.hand_solref) == 2, f"{c}.hand_solimp/solref", "3 and 2 values")
-        for name in ("actuator_kp", "actuator_force_limit", "object_mass_kg", "force_per_kg", "max_translation_m",
+        for name in ("actuator_kp", "actuator_force_limit", "actuator_time_constant_s", "object_mass_kg", "force_per_kg", "max_translation_m",
                      "max_rotation_deg", "max_pregrasp_penetration_m", "touch_distance_m"):
             _check(getattr(self, name) > 0, f"{c}.{name}", f"must be > 0, got {getattr(self, name)}")
         _check(self.contact_distance_m >= self.touch_distance_m, f"{c}.contact_distance_m",

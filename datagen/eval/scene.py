@@ -151,8 +151,12 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         p.solref = list(cfg.hand_solref)
         p.margin = cfg.geom_margin_m
     for a in spec.actuators:
+        # the config's stiffness, and velocity damping (bias -kv qdot) of at most kp times the
+        # config's time constant: Menagerie's Allegro (kp 24, kv 8) and LEAP (kp 8, kv 5.6) at kp 5
+        # with their own kv would close a finger in 1-1.6 s, after the protocol's 0.4 s phases
         a.gainprm[0] = cfg.actuator_kp
         a.biasprm[1] = -cfg.actuator_kp
+        a.biasprm[2] = max(float(a.biasprm[2]), -cfg.actuator_kp * cfg.actuator_time_constant_s)
         a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         a.forcerange = [-cfg.actuator_force_limit, cfg.actuator_force_limit]
 

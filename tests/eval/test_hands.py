@@ -40,3 +40,26 @@ def test_hand_scene_and_free_flight(name, box_dir):
         assert np.allclose(r.direction_translation_m, expected, atol=1e-9)
     with Evaluator(hand, EvalConfig()) as ev:
         assert ev.evaluate(pieces, poses).reason == "no_contact"
+
+
+@pytest.mark.parametrize("name", ["shadow", "leap", "allegro"])
+def test_fingers_reach_a_step_target_within_a_protocol_phase(name, box_dir):
+    # position actuators at the protocol's kp with damping kv <= kp * 0.1 s: a free finger joint
+    # stepped 0.3 rad closes >= 90% of the step within one phase (0.4 s), on every hand
+    if name not in available_hands():
+        pytest.skip(f"{name} needs `make hands`")
+    hand = load_hand(name)
+    with Evaluator(hand, EvalConfig()) as ev:
+        scene, _ = ev.scene(box_pieces((0.03, 0.02, 0.025), box_dir, name=f"box_{name}"))
+        m = scene.model
+        assert np.all(-m.actuator_biasprm[scene.actuators, 2] <= 5.0 * 0.1 + 1e-12)
+        d = mujoco.MjData(m)
+        q0 = hand.open_pose.numpy()
+        d.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = d.mocap_pos[scene.mocap] = [0.5, 0.5, 0.5]
+        d.qpos[scene.hand_qpos_adr] = q0
+        j = int(np.argmax(hand.joint_upper.numpy() - q0))  # the joint with the most room to flex
+        target = q0.copy()
+        target[j] += 0.3
+        d.ctrl[scene.actuators] = scene.ctrl(target)
+        mujoco.mj_step(m, d, nstep=100)  # 0.4 s at 4 ms
+        assert d.qpos[scene.hand_qpos_adr[j]] - q0[j] > 0.27, (name, hand.joint_names[j])
