@@ -62,8 +62,8 @@ class TaskTest:
     object scales (a torque of F * arm * scale N m). The object moves on ``joint``: ``free``
     (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor``) or ``slide`` (prismatic
     along ``axis``); ``anchor`` is in metres; ``limits``: the joint's end stops from the initial
-    pose, ``(lower, upper)`` metres or radians, None for a free side (None: no end stops). Success: the object stays within
-    ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s), measured from the
+    pose, ``(lower, upper)`` metres or radians, None for a free side (None: no end stops).
+    Success: the object stays within ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s), measured from the
     object's initial pose (``measure_from: initial``, as the six-direction protocol) or from its
     pose once the hand has closed (``closed``: only the disturbance's effect counts, as in the
     paper's task test where the hand is fixed at the grasp); ``min_touching_links`` (None: the
@@ -200,8 +200,8 @@ class EvalConfig:
         _check(self.condim in (1, 3, 4, 6), f"{c}.condim", "must be 1, 3, 4 or 6")
         _check(len(self.friction) == 2 and min(self.friction) >= 0, f"{c}.friction", "two values >= 0")
         _check(len(self.hand_solimp) == 3 and len(self.hand_solref) == 2, f"{c}.hand_solimp/solref", "3 and 2 values")
-        for name in ("actuator_kp", "actuator_force_limit", "actuator_time_constant_s", "object_mass_kg", "force_per_kg", "max_translation_m",
-                     "max_rotation_deg", "max_pregrasp_penetration_m", "touch_distance_m"):
+        for name in ("actuator_kp", "actuator_force_limit", "actuator_time_constant_s", "object_mass_kg",
+                     "force_per_kg", "max_translation_m", "max_rotation_deg", "max_pregrasp_penetration_m", "touch_distance_m"):
             _check(getattr(self, name) > 0, f"{c}.{name}", f"must be > 0, got {getattr(self, name)}")
         _check(self.contact_distance_m >= self.touch_distance_m, f"{c}.contact_distance_m",
                "must be >= touch_distance_m")

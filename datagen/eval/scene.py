@@ -5,8 +5,8 @@ under ``hand_base``, a body with a free joint welded to the mocap body ``hand_mo
 is driven by moving the mocap body and by its position actuators (gains set from the config).
 The object is one body of the convex pieces at ``scale`` metres per normalized unit, total
 mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
-hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's condim, friction and margin; hand
-geoms get the hand solimp/solref.
+hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's
+condim, friction and margin; hand geoms get the hand solimp/solref.
 """
 
 from __future__ import annotations

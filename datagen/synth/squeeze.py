@@ -118,8 +118,9 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     object with the :func:`balanced_forces` ``f``, scaled so the largest is ``force_n`` newtons
     times the set's balance ``1 - |sum f| / sum |f|`` (1: the forces cancel, a pure grip; 0: they
     all push one way, as fingers under a plate or hooked in a strap, and a squeeze would only
-    push the object out of the hand, so none is added), plus the fingertip motion that closes ``approach_m`` along the normal (the gap between the
-    collision spheres and the hand's real geometry). The pregrasp is the mirror image
+    push the object out of the hand, so none is added), plus the fingertip motion that closes
+    ``approach_m`` along the normal (the gap between the collision spheres and the hand's real
+    geometry). The pregrasp is the mirror image
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
     """
     B, F = points.shape[:2]
