@@ -132,6 +132,7 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
     def rand(*shape):
         return torch.rand(*shape, generator=generator, dtype=torch.float64).to(dev, dt)
 
+    fingertips = init_cfg.kind == "approach" and init_cfg.aim == "fingertips"
     origin = torch.empty(B, 3, dtype=dt, device=dev)
     normal = torch.empty(B, 3, dtype=dt, device=dev)
     for k, target in enumerate(targets):
@@ -146,7 +147,7 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
             a = -1.0 * torch.tensor(init_cfg.approach if init_cfg.kind == "approach" else (0, 0, -1.0), dtype=dt, device=dev)
             n = _unit(a)
             target_pt = torch.tensor(init_cfg.target_m if init_cfg.kind == "approach" else (0, 0, 0.0), dtype=dt, device=dev)
-            if init_cfg.kind == "approach" and init_cfg.aim == "fingertips":
+            if fingertips:
                 reach = 0.0  # the fingertips go to the target itself, not to the hull's plane
             else:
                 reach = ((target.hull_points.to(dev, dt) - target_pt) @ n).max()
@@ -161,7 +162,6 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
     tilt_axis = _rotate_about(_any_perpendicular(approach), approach, 2 * math.pi * rand(B))
     approach = _rotate_about(approach, tilt_axis, math.radians(init_cfg.tilt_deg) * (2 * rand(B) - 1))
     open_joints = curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose
-    fingertips = init_cfg.kind == "approach" and init_cfg.aim == "fingertips"
     if init_cfg.kind == "approach" and init_cfg.thumb is not None:
         hint = torch.tensor(init_cfg.thumb, dtype=dt, device=dev).expand(B, 3)
         base = _unit(hint - (hint * approach).sum(-1, keepdim=True) * approach)
