@@ -169,9 +169,14 @@ class SynthConfig:
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
     sphere_margin_m: float = 0.0015  #: spheres overshoot the hand's collision shapes (<= 2.8 mm): they may sink this far
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
+    seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
+    seed_select_iter: int = 80  #: iterations every seed runs before the best seed of each grasp is kept
     seed: int = 0
 
     def __post_init__(self):
+        if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
+            raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
+                              f"got {self.seeds_per_grasp}, {self.seed_select_iter}")
         if self.iters < 1 or self.num_directions < 1:
             raise ConfigError(f"SynthConfig: iters and num_directions must be >= 1, got {self.iters}, {self.num_directions}")
         if self.task_energy_kind not in ("cos", "l2"):

@@ -69,15 +69,18 @@ class GroupedDescent:
         gt, gw, gj = torch.autograd.grad(e.sum(), (t, w, j))
         return e.detach(), (gt, gw, gj), extras
 
-    def run(self, energy_fn, x: PoseVariables, iters: int, callback=None):
-        """Optimize ``x`` for ``iters`` iterations; returns the final variables, energy and extras."""
+    def run(self, energy_fn, x: PoseVariables, iters: int, callback=None, first_iter: int = 0):
+        """Optimize ``x`` for ``iters`` iterations; returns the final variables, energy and extras.
+
+        ``first_iter`` continues an earlier run's schedule: the step starts decayed as at that
+        iteration (momentum and per-sample step scales start afresh)."""
         e, g, extras = self._evaluate(energy_fn, x)
         m = [torch.zeros_like(gi) for gi in g]
         B = x.translation.shape[0]
         scale = torch.ones(B, 1, dtype=x.translation.dtype, device=x.translation.device)
-        step = 1.0
-        for it in range(iters):
-            if it and it % self.decay_every == 0:
+        step = self.decay ** (first_iter // self.decay_every)
+        for it in range(first_iter, first_iter + iters):
+            if it > first_iter and it % self.decay_every == 0:
                 step *= self.decay
             gn = (g[0] / g[0].norm(dim=-1, keepdim=True).clamp_min(1e-12),
                   g[1] / g[1].norm(dim=-1, keepdim=True).clamp_min(1e-12),

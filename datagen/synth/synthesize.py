@@ -97,6 +97,29 @@ def _resolve_fingers(hand, task: TaskSpec) -> list[int]:
     return [hand.fingertip_names.index(f) for f in present]
 
 
+def _best_seeds(hand, targets, seed_index, x, energy, tip_spheres, task: TaskSpec, cfg: SynthConfig,
+                S: int) -> torch.Tensor:
+    """(B,) row of the best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1``).
+
+    Force closure (gamma 180 deg, several contacts): the largest epsilon of the seed's
+    fingertip contacts (the synthesis epsilon of the final grasp predicts the MuJoCo verdict,
+    and whether a pose reaches force closure is settled by the time the fingers first touch);
+    ties (no seed in closure) and other tasks: the lowest energy."""
+    with torch.no_grad():
+        score = -energy
+        if task.gamma_deg >= 180 and tip_spheres.numel() > 1:
+            st = hand_object_state(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints),
+                                   tip_spheres, sphere_margin=cfg.sphere_margin_m, self_collision=False)
+            eps = epsilon_metric(st.contact_points.double(), st.contact_normals.double(), cfg.mu,
+                                 normalize=cfg.normalize, contact_model=cfg.contact_model,
+                                 torsional_mu=cfg.torsional_mu).to(energy.dtype)
+            usable = (st.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m)
+            # epsilon first; among seeds of equal epsilon (e.g. all 0) the lower energy
+            score = torch.where(usable, eps, torch.zeros_like(eps)) * 1e3 - energy.clamp(-1e2, 1e2) / 1e3
+        rows = score.reshape(-1, S).argmax(-1)
+        return torch.arange(rows.shape[0], device=rows.device) * S + rows
+
+
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
                generator: torch.Generator | None = None, callback=None) -> SynthesisResult:
     """Optimize ``num_per_object`` poses on each target; see the module docstring."""
@@ -108,25 +131,39 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)
     finger_index = _resolve_fingers(hand, task)
     tip_spheres = contact_sphere_index(hand)[finger_index]
-    root, joints = initial_poses(hand, targets, object_index, task.init, gen, tip_index=finger_index)
+    S = cfg.seeds_per_grasp
+    seed_index = object_index.repeat_interleave(S)  # (B S,) seeds of grasp b: rows b S .. b S + S - 1
+    root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index)
     joints = hand.apply_couplings(joints)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
 
-    def energy_fn(t, q, j):
-        jj = hand.apply_couplings(j)
-        state = hand_object_state(hand, targets, object_index, torch.cat([t, q], -1), jj, tip_spheres,
-                                  exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
-                                  self_collision=cfg.weights.self_penetration > 0)
-        terms = evaluate_state(state, cfg, task, directions)
-        extras = {k: v.detach() for k, v in terms.as_dict().items()}
-        extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
-        return terms.total, extras
+    def energy_on(index):
+        def energy_fn(t, q, j):
+            jj = hand.apply_couplings(j)
+            state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, tip_spheres,
+                                      exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
+                                      self_collision=cfg.weights.self_penetration > 0)
+            terms = evaluate_state(state, cfg, task, directions)
+            extras = {k: v.detach() for k, v in terms.as_dict().items()}
+            extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
+            return terms.total, extras
+        return energy_fn
 
     opt = GroupedDescent(finger_joint_groups(hand), (cfg.step_translation_m, cfg.step_rotation_rad, cfg.step_joint_rad),
                          momentum=cfg.momentum, step_decay=cfg.step_decay, decay_every=cfg.decay_every,
                          project=hand.apply_couplings)
-    x0 = PoseVariables(root[:, :3].clone(), root[:, 3:].clone(), joints.clone())
-    x, _, extras = opt.run(energy_fn, x0, cfg.iters, callback=callback)
+    x = PoseVariables(root[:, :3].clone(), root[:, 3:].clone(), joints.clone())
+    first = 0
+    if S > 1:  # multi-start: every seed runs the first iterations, the best seed of each grasp goes on
+        first = min(cfg.seed_select_iter, cfg.iters)
+        x, e, extras = opt.run(energy_on(seed_index), x, first, callback=callback)
+        best = _best_seeds(hand, targets, seed_index, x, e, tip_spheres, task, cfg, S)
+        x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
+        root, joints = root[best], joints[best]
+    if cfg.iters > first or S == 1:
+        x, _, extras = opt.run(energy_on(object_index), x, cfg.iters - first, callback=callback, first_iter=first)
+    else:
+        extras = {k: v[best] for k, v in extras.items()}
     t_opt = time.perf_counter() - t0
 
     with torch.no_grad():
