@@ -7,7 +7,8 @@ import torch
 import trimesh
 
 from datagen.hands import load_hand
-from datagen.synth import GraspTarget, SynthConfig, TaskSpec, load_task, synthesize
+from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.tasks import TaskSpec, load_task
 from datagen.synth.init import initial_poses
 from tests.hands.conftest import hand_params
 
