@@ -14,7 +14,6 @@ import hashlib
 import importlib.util
 import os
 
-import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import torch
+
+from datagen._atomic import atomic_write_text
 
 from .spec import AssetRef, Coupling, HandSpecError
 
@@ -180,10 +181,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
         directory.mkdir(parents=True, exist_ok=True)
         out = directory / f"{name}-{digest}.xml"
         if not out.is_file():
-            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".xml.tmp")
-            with os.fdopen(fd, "w") as fh:
-                fh.write(xml)
-            os.replace(tmp, out)
+            atomic_write_text(out, xml, fsync=False)  # a cache: content-addressed, rebuilt if lost
     return FlatHand(xml=xml, model=model, path=out, source=source)
 
 
