@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import logging
 import os
 
 import xml.etree.ElementTree as ET
@@ -25,6 +26,8 @@ import torch
 from datagen._atomic import atomic_write_text
 
 from .spec import AssetRef, Coupling, HandSpecError
+
+log = logging.getLogger(__name__)
 
 __all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator_matrix",
            "detect_couplings", "cache_dir"]
@@ -182,6 +185,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
         out = directory / f"{name}-{digest}.xml"
         if not out.is_file():
             atomic_write_text(out, xml, fsync=False)  # a cache: content-addressed, rebuilt if lost
+            log.debug("flattened %s -> %s", source, out)
     return FlatHand(xml=xml, model=model, path=out, source=source)
 
 
