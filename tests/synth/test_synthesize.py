@@ -12,7 +12,7 @@ from datagen.synth import ConfigError, GraspTarget, SynthConfig, synthesize
 from datagen.tasks import TaskSpec, load_task
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
-from datagen.synth.rotation import axis_angle_to_quat, matrix_to_quat, quat_multiply, quat_to_matrix
+from datagen.rotation import axis_angle_to_quat, matrix_to_quat, quat_multiply, quat_to_matrix
 from datagen.synth.rows import result_table
 from schemas import check_version
 
