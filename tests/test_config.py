@@ -12,7 +12,7 @@ from datagen.config import Config, stable_hash
 from datagen.errors import ConfigError, DatagenError, EvalError
 from datagen.eval import EvalConfig
 from datagen.synth import SynthConfig
-from datagen.tasks import TaskSpec, TaskTest
+from datagen.tasks import TaskSpec, TaskTest, load_task
 
 
 @dataclass(frozen=True)
@@ -80,10 +80,11 @@ def test_config_classes_use_their_own_error_class():
 
 
 def test_hash_is_stable_across_processes_and_follows_the_content():
-    c = SynthConfig(iters=7)
-    code = "from datagen.synth import SynthConfig; print(SynthConfig(iters=7).hash())"
+    spec = load_task("turn_knob2")  # nested configs, tuples, floats, a free-form mapping
+    code = "from datagen.tasks import load_task; print(load_task('turn_knob2').hash())"
     other = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
-    assert other == c.hash()
+    assert other == spec.hash()
+    c = SynthConfig(iters=7)
     assert SynthConfig(iters=8).hash() != c.hash()
     # the hash is that of the canonical JSON: independent of key order
     d = c.to_dict()

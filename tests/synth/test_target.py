@@ -8,7 +8,7 @@ from datagen.synth import GraspTarget
 
 
 def test_to_returns_a_copy_and_keeps_the_original():
-    t = GraspTarget.from_mesh(trimesh.creation.box((1, 1, 1)), 0.05, "box")
+    t = GraspTarget.from_mesh(trimesh.creation.box((1, 1, 1)), 0.05, "box", hull_samples=64, grid_resolution=8)
     assert t.grid is not None
     moved = t.to("meta")  # a device every machine has: tensors without storage
     assert moved is not t and moved.sdf is not t.sdf and moved.grid is not t.grid

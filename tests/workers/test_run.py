@@ -20,7 +20,7 @@ from workers.run import run_job
 from .conftest import comparable_rows, tiny_config
 from .test_shard import run_all
 
-pytestmark = pytest.mark.ray
+pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
 
