@@ -73,3 +73,17 @@ def test_library_modules_log_instead_of_printing(path):
              or isinstance(n, ast.Call) and getattr(n.func, "attr", None) == "warn"
              and getattr(n.func.value, "id", None) == "warnings"]
     assert not calls, f"{path}:{calls[0].lineno}: print/warnings.warn in library code; use logging.getLogger(__name__)"
+
+
+def test_the_curated_api_resolves_lazily():
+    import subprocess
+    import sys
+
+    import datagen
+
+    code = "import sys, datagen; assert 'torch' not in sys.modules and 'mujoco' not in sys.modules"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr  # import datagen stays light
+    assert len(datagen.__all__) >= 10
+    for name in datagen.__all__:
+        assert getattr(datagen, name) is not None, name
