@@ -255,7 +255,8 @@ def render(records: Path, machine: str) -> str:
              "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
              "Each cell: success % (poses x iterations of that cell in the size table below). Results are grouped by "
              "the code version they ran at; the task table above is the current checkout's (`git log "
-             "datagen/tasks/specs` shows what changed between versions).", ""]
+             "-- datagen/tasks/specs datagen/synth/tasks` shows what changed between versions; before the house "
+             "refactor the YAMLs lived in datagen/synth/tasks).", ""]
     lines += task_definitions() + [""]
     for version in versions:
         recs = [r for r in allrecs if r.get("code_version", "-") == version]
