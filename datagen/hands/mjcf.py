@@ -14,7 +14,6 @@ import hashlib
 import importlib.util
 import logging
 import os
-
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
