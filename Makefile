@@ -5,6 +5,10 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+# The torch build: the local CPU wheel. The package metadata only asks for torch>=2.1, which on its
+# own resolves the newest (CUDA) build; installing this one first, and naming it again with the
+# project, keeps every later request satisfied by it.
+TORCH ?= torch==2.13.0
 
 .PHONY: install test bench-gws bench-synth clean-venv bench-objects
 
@@ -12,8 +16,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	# torch first, from the local CPU wheel: a later torch request is then already
 	# satisfied and never resolves a CUDA build.
-	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet '$(TORCH)'
+	$(PY) -m pip install --quiet '$(TORCH)' -e '.[dev]'
 	$(PY) -c "import torch, sys; v = torch.__version__; sys.exit(0 if v.startswith('2.13.0') else 'unexpected torch ' + v)"
 	touch $(STAMP)
 
@@ -22,6 +26,17 @@ install: $(STAMP)
 # The optional hands (LEAP, Allegro, Shadow E3M5) are installed so CI tests every hand.
 test: $(STAMP) hands
 	$(PY) -m pytest -q tests
+
+# The edit-test loop (< 2 min on 2 cores): everything but the tests marked slow.
+.PHONY: test-fast
+test-fast: $(STAMP) hands
+	$(PY) -m pytest -q -m "not slow" tests
+
+# The two examples/ scripts: synthesize + evaluate one object; read the job in $(OUT) (make dataset).
+.PHONY: examples
+examples: $(STAMP)
+	$(PY) examples/synthesize_and_evaluate.py --grasps 8
+	$(PY) examples/read_job.py $(OUT)
 
 bench-gws: $(STAMP)
 	$(PY) -m benchmarks.bench_gws

@@ -35,7 +35,8 @@ from datagen.eval.scene import pieces_from_processed
 from datagen.hands import load_hand
 from datagen.objects.process import process_object
 from datagen.objects.sources import iter_source
-from datagen.synth import GraspTarget, SynthConfig, load_task, synthesize
+from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.tasks import load_task
 from datagen.synth.energies import contact_sphere_index
 from datagen.synth.squeeze import force_squeeze, joint_squeeze, normal_squeeze
 from datagen.synth.synthesize import finger_joint_mask

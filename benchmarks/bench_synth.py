@@ -22,7 +22,8 @@ import trimesh
 
 from benchmarks.common import machine_description, median_time
 from datagen.hands import load_hand
-from datagen.synth import GraspTarget, SynthConfig, load_task, synthesize
+from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.tasks import load_task
 from datagen.synth.energies import contact_sphere_index
 from datagen.synth.init import initial_poses
 from datagen.wrench import sample_directions, task_energy

@@ -155,8 +155,8 @@ def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects
                no_self_pen: bool) -> dict:
     """Synthesize ``num`` poses of one task with one variant and evaluate each; a JSON-able record."""
     from datagen.eval import EvalConfig, Evaluator
-    from datagen.eval.tasks import task_object
-    from datagen.synth import load_task, synthesize
+    from datagen.synth import synthesize
+    from datagen.tasks import load_task, task_object
 
     task = load_task(task_name)
     target, pieces = objects.get(task_object(task))
@@ -212,12 +212,12 @@ def _pct(x) -> str:
 def task_definitions() -> list[str]:
     """The tasks as their YAMLs and objects define them (one row per task)."""
     from datagen.eval import EvalConfig
-    from datagen.eval.tasks import task_object
+    from datagen.tasks import task_object
     from datagen.objects import task_objects
-    from datagen.synth import load_task
+    from datagen.tasks import load_task
 
     cfg = EvalConfig()
-    out = ["## Tasks (from `datagen/synth/tasks/*.yaml` and `datagen/objects/task_objects.py`)", "",
+    out = ["## Tasks (from `datagen/tasks/specs/*.yaml` and `datagen/objects/task_objects.py`)", "",
            "| task | object (scale m) | joint | w_t | gamma | fingers | init approach / aim (m) | test: disturbance, pass |",
            "|---|---|---|---|---|---|---|---|"]
     for t in TASKS:
@@ -248,14 +248,15 @@ def render(records: Path, machine: str) -> str:
     lines = ["# Task-oriented benchmark (paper Table II and its hyper-parameter table)", "",
              f"Machine: {machine}", "",
              "Ten tasks on procedural objects with virtual joints (`datagen/objects/task_objects.py`), task specs "
-             "`datagen/synth/tasks/<task>.yaml` (TWS, fingers, initial pose, and the `eval` block each task's test "
+             "`datagen/tasks/specs/<task>.yaml` (TWS, fingers, initial pose, and the `eval` block each task's test "
              "comes from). Success = MuJoCo task test: the disturbance -w_t (magnitudes per task in its YAML) on the "
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
              "six-direction hold test (1 N, 5 cm / 15 deg from the initial pose). Task tests measure the object's motion from "
              "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
              "Each cell: success % (poses x iterations of that cell in the size table below). Results are grouped by "
              "the code version they ran at; the task table above is the current checkout's (`git log "
-             "datagen/synth/tasks` shows what changed between versions).", ""]
+             "-- datagen/tasks/specs datagen/synth/tasks` shows what changed between versions; before the house "
+             "refactor the YAMLs lived in datagen/synth/tasks).", ""]
     lines += task_definitions() + [""]
     for version in versions:
         recs = [r for r in allrecs if r.get("code_version", "-") == version]

@@ -137,7 +137,7 @@ def task_targets(task, targets: list) -> list:
     """The targets a task runs on: a task whose YAML names its object (``eval.object``, the
     task-benchmark tasks) only that object (``task-<name>`` of the ``tasks`` source), other
     tasks every target."""
-    from datagen.eval.tasks import task_object
+    from datagen.tasks import task_object
     from datagen.objects.task_objects import object_id
 
     name = task_object(task)
@@ -152,7 +152,8 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
 
     from datagen.objects.manifest import ManifestEntry
     from datagen.objects.process import load_processed
-    from datagen.synth import GraspTarget, load_task, synthesize
+    from datagen.synth import GraspTarget, synthesize
+    from datagen.tasks import load_task
     from datagen.synth.rows import result_table
     from datagen.eval.table import evaluate_table
 

@@ -1,6 +1,6 @@
 """Every constant of the MuJoCo evaluation in one validated config, loadable from YAML.
 
-Defaults reproduce the public six-direction hold test (NOTES §3). Units: metres, seconds,
+Defaults reproduce the public six-direction hold test (ARCHITECTURE.md, "The evaluation protocol"). Units: metres, seconds,
 newtons, kilograms; angles in degrees where the field name says ``_deg``. The simulated world
 is the object frame: the object starts at the origin with the identity pose, at scale
 ``object_scale`` metres per normalized unit.
@@ -12,13 +12,12 @@ while the object moves on a free, revolute or prismatic joint).
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar, Mapping
 
-import yaml
+from datagen.config import Config
+from datagen.errors import EvalError
+from datagen.tasks import TaskTest, builtin_task_test, has_builtin_test
 
 __all__ = ["EvalConfig", "EvalError", "TaskTest", "DIRECTIONS", "DIRECTION_NAMES", "DEFAULT_TASKS"]
 
@@ -26,17 +25,6 @@ __all__ = ["EvalConfig", "EvalError", "TaskTest", "DIRECTIONS", "DIRECTION_NAMES
 DIRECTION_NAMES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
 DIRECTIONS: tuple[tuple[float, float, float], ...] = (
     (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
-JOINT_KINDS = ("free", "hinge", "slide")
-
-
-class EvalError(ValueError):
-    """A configuration or input problem of the evaluation (not a failed grasp, which is a status).
-
-    The message names the thing, the reason and, where possible, the remedy."""
-
-    def __init__(self, thing: str, reason: str, remedy: str = "") -> None:
-        self.thing, self.reason, self.remedy = thing, reason, remedy
-        super().__init__(f"{thing}: {reason}" + (f" ({remedy})" if remedy else ""))
 
 
 def _check(ok: bool, what: str, reason: str) -> None:
@@ -44,88 +32,9 @@ def _check(ok: bool, what: str, reason: str) -> None:
         raise EvalError(what, reason)
 
 
-def _unit3(v: Any, what: str) -> tuple[float, float, float]:
-    t = tuple(float(x) for x in v)
-    _check(len(t) == 3 and all(math.isfinite(x) for x in t), what, f"must be 3 finite numbers, got {v!r}")
-    n = math.sqrt(sum(x * x for x in t))
-    _check(n > 1e-9, what, "must be a non-zero direction")
-    return tuple(x / n for x in t)  # type: ignore[return-value]
-
-
-@dataclass(frozen=True)
-class TaskTest:
-    """The physical test of one task (object frame).
-
-    The disturbance is ``-w_t`` (unit 6-D [force, torque] after normalization): its force part
-    is scaled by ``force_n`` newtons (None: ``EvalConfig.force_per_kg * object mass``), its
-    torque part by ``torque_nm`` N m, or if that is None by the force times ``torque_arm``
-    object scales (a torque of F * arm * scale N m). The object moves on ``joint``: ``free``
-    (6 DoF), ``hinge`` (revolute about ``axis`` through ``anchor``) or ``slide`` (prismatic
-    along ``axis``); ``anchor`` is in metres; ``limits``: the joint's end stops from the initial
-    pose, ``(lower, upper)`` metres or radians, None for a free side (None: no end stops).
-    Success: the object stays within ``max_translation_m`` / ``max_rotation_deg`` (None: the `EvalConfig`'s), measured from the
-    object's initial pose (``measure_from: initial``, as the six-direction protocol) or from its
-    pose once the hand has closed (``closed``: only the disturbance's effect counts, as in the
-    paper's task test where the hand is fixed at the grasp); ``min_touching_links`` (None: the
-    config's) overrides the no-contact rule (a one-finger press touches one link).
-    """
-
-    w_t: tuple[float, float, float, float, float, float]
-    joint: str = "free"
-    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    anchor: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    limits: tuple[float | None, float | None] | None = None
-    force_n: float | None = None
-    torque_arm: float = 1.0
-    torque_nm: float | None = None
-    max_translation_m: float | None = None
-    max_rotation_deg: float | None = None
-    min_touching_links: int | None = None
-    measure_from: str = "initial"
-
-    def __post_init__(self) -> None:
-        w = tuple(float(x) for x in self.w_t)
-        _check(len(w) == 6 and all(math.isfinite(x) for x in w), "TaskTest.w_t",
-               f"must be 6 finite numbers, got {self.w_t!r}")
-        _check(any(abs(x) > 0 for x in w), "TaskTest.w_t", "must be a non-zero wrench direction")
-        object.__setattr__(self, "w_t", w)
-        _check(self.joint in JOINT_KINDS, "TaskTest.joint", f"must be one of {JOINT_KINDS}, got {self.joint!r}")
-        object.__setattr__(self, "axis", _unit3(self.axis, "TaskTest.axis"))
-        a = tuple(float(x) for x in self.anchor)
-        _check(len(a) == 3 and all(math.isfinite(x) for x in a), "TaskTest.anchor", "must be 3 finite numbers")
-        object.__setattr__(self, "anchor", a)
-        if self.limits is not None:
-            ok = isinstance(self.limits, (tuple, list)) and len(self.limits) == 2 and self.joint != "free"
-            lim = tuple(None if x is None else float(x) for x in self.limits) if ok else ()
-            ok = ok and all(x is None or math.isfinite(x) for x in lim) \
-                and (lim[0] is None or lim[0] <= 0) and (lim[1] is None or lim[1] >= 0) and lim != (None, None)
-            _check(ok, "TaskTest.limits", "must be (lower <= 0, upper >= 0) of a hinge or slide joint, "
-                   f"null for a side without an end stop; got {self.limits!r} on a {self.joint!r} joint")
-            object.__setattr__(self, "limits", lim)
-        _check(self.force_n is None or self.force_n > 0, "TaskTest.force_n", "must be > 0 or null")
-        _check(self.torque_arm >= 0, "TaskTest.torque_arm", "must be >= 0")
-        for name in ("torque_nm", "max_translation_m", "max_rotation_deg"):
-            v = getattr(self, name)
-            _check(v is None or (isinstance(v, (int, float)) and v > 0), f"TaskTest.{name}", f"must be > 0 or null, got {v!r}")
-        _check(self.measure_from in ("initial", "closed"), "TaskTest.measure_from",
-               f"must be 'initial' or 'closed', got {self.measure_from!r}")
-        _check(self.min_touching_links is None or (isinstance(self.min_touching_links, int) and self.min_touching_links >= 0),
-               "TaskTest.min_touching_links", f"must be an int >= 0 or null, got {self.min_touching_links!r}")
-
-    def disturbance(self, object_mass_kg: float, object_scale_m: float, force_per_kg: float):
-        """(6,) disturbance wrench [force N, torque N m] applied at the object's centre of mass."""
-        import numpy as np
-
-        w = -np.asarray(self.w_t, dtype=np.float64)
-        w /= np.linalg.norm(w)
-        f = self.force_n if self.force_n is not None else force_per_kg * object_mass_kg
-        tau = self.torque_nm if self.torque_nm is not None else f * self.torque_arm * object_scale_m
-        return np.concatenate([w[:3] * f, w[3:] * tau])
-
-
 # Generic tests for any object (a knob turned about the object's z axis through its origin;
 # lifting along +z). The benchmark's ten tasks (turn_handle, push_button, pull_drawer, ...) are
-# not here: their tests come from their task YAMLs (`datagen.eval.tasks`), which `task_test`
+# not here: their tests come from their task YAMLs (`datagen.tasks.evaluation`), which `task_test`
 # consults for any name not in `hold_tasks` or `tasks`.
 DEFAULT_TASKS: dict[str, TaskTest] = {
     "turn_knob": TaskTest(w_t=(0, 0, 0, 0, 0, 1), joint="hinge", axis=(0, 0, 1)),
@@ -134,8 +43,10 @@ DEFAULT_TASKS: dict[str, TaskTest] = {
 
 
 @dataclass(frozen=True)
-class EvalConfig:
-    """All constants of the evaluation (defaults: the public protocol of NOTES §3)."""
+class EvalConfig(Config):
+    """All constants of the evaluation (defaults: the public six-direction protocol, ARCHITECTURE.md)."""
+
+    config_error: ClassVar[type[EvalError]] = EvalError
 
     # --- physics (MuJoCo options; gravity off) ---
     timestep_s: float = 0.004
@@ -227,13 +138,11 @@ class EvalConfig:
         """None for a six-direction task, else its `TaskTest`; unknown tasks raise `EvalError`.
 
         Looked up in ``hold_tasks``, then ``tasks``, then the built-in task YAMLs' ``eval`` block
-        (`datagen.eval.tasks.builtin_task_test`)."""
+        (`datagen.tasks.builtin_task_test`)."""
         if task in self.hold_tasks:
             return None
         if task in self.tasks:
             return self.tasks[task]
-        from .tasks import builtin_task_test, has_builtin_test
-
         if has_builtin_test(task):
             return builtin_task_test(task)
         raise EvalError(f"task {task!r}", "has no evaluation test",
@@ -242,36 +151,11 @@ class EvalConfig:
 
     # ------------------------------------------------------------------ YAML
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any] | None) -> "EvalConfig":
-        """Build from a mapping (e.g. YAML); unknown keys raise `EvalError`. ``tasks`` entries are
-        mappings of `TaskTest` fields and extend (or replace, by name) the built-in tasks."""
-        data = dict(data or {})
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise EvalError("eval config", f"unknown keys {unknown}", f"allowed: {sorted(known)}")
-        if "tasks" in data:
-            tasks = dict(DEFAULT_TASKS)
-            for name, t in dict(data["tasks"] or {}).items():
-                try:
-                    tasks[str(name)] = TaskTest(**dict(t))
-                except TypeError as exc:
-                    raise EvalError(f"eval config task {name!r}", str(exc)) from None
-            data["tasks"] = tasks
-        for k in ("gravity", "friction", "hand_solimp", "hand_solref", "weld_solref", "hold_tasks"):
-            if k in data:
-                data[k] = tuple(data[k])
-        return cls(**data)
-
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> "EvalConfig":
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise EvalError(str(path), f"cannot read the eval config: {exc}") from None
-        return cls.from_dict(data)
-
-    def to_dict(self) -> dict[str, Any]:
-        out = dataclasses.asdict(self)
-        out["tasks"] = {k: dataclasses.asdict(v) for k, v in self.tasks.items()}
-        return out
+    def from_dict(cls, data: Mapping[str, Any] | None = None, where: str | None = None) -> "EvalConfig":
+        """Build from a mapping (e.g. YAML; `datagen.config`): unknown keys raise `EvalError`.
+        ``tasks`` entries are mappings of `TaskTest` fields and extend (or replace, by name) the
+        built-in `DEFAULT_TASKS`."""
+        cfg = super().from_dict(data, where or "eval config")
+        if data and "tasks" in data:
+            cfg = replace(cfg, tasks={**DEFAULT_TASKS, **cfg.tasks})
+        return cfg

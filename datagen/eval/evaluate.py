@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import logging
 import math
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -38,6 +39,8 @@ from .config import DIRECTION_NAMES, DIRECTIONS, EvalConfig, EvalError, TaskTest
 from .hold import DirectionResult, close_hand, hold, initial_state
 from .metrics import StaticMetrics, static_metrics
 from .scene import ObjectPieces, Scene, build_scene
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Reason", "GraspResult", "Evaluator"]
 
@@ -122,6 +125,8 @@ class Evaluator:
             self._scenes.move_to_end(key)
             return self._scenes[key]
         scene = build_scene(self.hand, pieces, self.cfg, task)
+        log.debug("scene of %s: %d pieces at scale %.3f m, joint %s (%d scenes cached)",
+                  pieces.object_id, len(pieces.paths), pieces.scale, joint[0] if joint else "free", len(self._scenes) + 1)
         datas = [mujoco.MjData(scene.model) for _ in range(len(DIRECTIONS) + 2)]
         self._scenes[key] = (scene, datas)
         while len(self._scenes) > self._cache_size:

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from datagen.rotation import quat_angle_np
+
 from .config import EvalConfig
 from .scene import Scene
 
@@ -86,8 +88,7 @@ class DirectionResult:
 def _pose_error(scene: Scene, data: mujoco.MjData, pos0: np.ndarray, quat0: np.ndarray) -> tuple[float, float]:
     b = scene.object_body
     t = float(np.linalg.norm(data.xpos[b] - pos0))
-    c = min(1.0, abs(float(data.xquat[b] @ quat0)))
-    return t, float(np.degrees(2.0 * np.arccos(c)))
+    return t, float(np.degrees(quat_angle_np(data.xquat[b], quat0)))
 
 
 def hold(scene: Scene, closed: mujoco.MjData, wrenches: np.ndarray, datas: list[mujoco.MjData],

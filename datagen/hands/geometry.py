@@ -15,15 +15,11 @@ import mujoco
 import numpy as np
 import trimesh
 
+from datagen.rotation import quat_to_matrix_np
+
 __all__ = ["Shape", "link_shapes", "sample_link_surface", "union_depth", "collision_links"]
 
 _SPHERE, _CAPSULE, _CYLINDER, _BOX, _POLY = "sphere", "capsule", "cylinder", "box", "polytope"
-
-
-def _quat_to_mat(q: np.ndarray) -> np.ndarray:
-    m = np.zeros(9)
-    mujoco.mju_quat2Mat(m, np.asarray(q, dtype=np.float64))
-    return m.reshape(3, 3)
 
 
 @dataclass(frozen=True)
@@ -86,7 +82,7 @@ def link_shapes(model: mujoco.MjModel, body: int) -> list[Shape]:
         if model.geom_bodyid[g] != body or not _is_collision(model, g):
             continue
         gtype, size = mujoco.mjtGeom(int(model.geom_type[g])), model.geom_size[g].copy()
-        pos, rot = model.geom_pos[g].copy(), _quat_to_mat(model.geom_quat[g])
+        pos, rot = model.geom_pos[g].copy(), quat_to_matrix_np(model.geom_quat[g])
         planes = None
         if gtype == mujoco.mjtGeom.mjGEOM_SPHERE:
             kind, local = _SPHERE, trimesh.creation.icosphere(subdivisions=3, radius=size[0])

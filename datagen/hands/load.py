@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import logging
 from pathlib import Path
 
 import torch
@@ -10,6 +11,8 @@ import torch
 from .mjcf import flatten_hand, resolve_asset
 from .model import HandModel
 from .spec import HandSpecError, load_spec
+
+log = logging.getLogger(__name__)
 
 __all__ = ["BUILTIN_HANDS", "available_hands", "builtin_spec_path", "load_hand"]
 
@@ -51,4 +54,5 @@ def load_hand(name_or_spec_path: str | Path = "shadow", *, device: torch.device 
     spec = load_spec(path)
     source = resolve_asset(spec.mjcf, spec.source_file)
     flat = flatten_hand(source, spec.root_body, name=spec.name, position_kp=spec.position_actuator_kp)
+    log.debug("hand %s: spec %s, MJCF %s (flattened: %s)", spec.name, path, source, flat.path)
     return HandModel(spec, flat, device=device, dtype=dtype)

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import logging
 import os
-
-import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +22,11 @@ import mujoco
 import numpy as np
 import torch
 
+from datagen._atomic import atomic_write_text
+
 from .spec import AssetRef, Coupling, HandSpecError
+
+log = logging.getLogger(__name__)
 
 __all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator_matrix",
            "detect_couplings", "cache_dir"]
@@ -180,10 +183,8 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
         directory.mkdir(parents=True, exist_ok=True)
         out = directory / f"{name}-{digest}.xml"
         if not out.is_file():
-            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".xml.tmp")
-            with os.fdopen(fd, "w") as fh:
-                fh.write(xml)
-            os.replace(tmp, out)
+            atomic_write_text(out, xml, fsync=False)  # a cache: content-addressed, rebuilt if lost
+            log.debug("flattened %s -> %s", source, out)
     return FlatHand(xml=xml, model=model, path=out, source=source)
 
 

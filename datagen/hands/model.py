@@ -19,21 +19,12 @@ import mujoco
 import numpy as np
 import torch
 
+from datagen.rotation import quat_to_matrix as quaternion_to_matrix
+
 from .mjcf import FlatHand, actuator_matrix, build_chain
 from .spec import HandSpec, HandSpecError
 
 __all__ = ["HandModel", "quaternion_to_matrix"]
-
-
-def quaternion_to_matrix(quat: torch.Tensor) -> torch.Tensor:
-    """(..., 3, 3) rotation of quaternions (..., 4) [w x y z], normalized first."""
-    q = quat / quat.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(q.shape[:-1] + (3, 3))
 
 
 @dataclass(frozen=True)

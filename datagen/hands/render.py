@@ -14,6 +14,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from datagen._atomic import atomic_write_bytes
+
 from .mjcf import FlatHand
 from .spec import HandSpec, HandSpecError
 
@@ -30,7 +32,7 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
 
     png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
            + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
-    Path(path).write_bytes(png)
+    atomic_write_bytes(path, png)
 
 
 def _annotated_model(spec: HandSpec, flat: FlatHand) -> mujoco.MjModel:

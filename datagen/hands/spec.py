@@ -16,9 +16,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 import yaml
+
+from datagen._atomic import atomic_write_text
+from datagen.config import Config
+from datagen.errors import DatagenError
 
 __all__ = [
     "HandSpecError",
@@ -36,16 +40,19 @@ __all__ = [
 SPEC_VERSION = 1
 
 
-class HandSpecError(ValueError):
+class HandSpecError(DatagenError, ValueError):
     """A hand spec or hand asset is unusable; the message names the file, the reason and the fix."""
 
     def __init__(self, path: str | Path | None, reason: str, remedy: str = "") -> None:
         self.path = None if path is None else str(path)
         self.reason = reason
-        self.remedy = remedy
         where = f"{self.path}: " if self.path else ""
-        fix = f" ({remedy})" if remedy else ""
-        super().__init__(f"{where}{reason}{fix}")
+        super().__init__(f"{where}{reason}", remedy)
+
+    @classmethod
+    def make(cls, thing: str, reason: str, remedy: str = "") -> "HandSpecError":
+        """The error `datagen.config` raises for a bad field ``thing`` (the file is added by the caller)."""
+        return cls(None, f"{thing}: {reason}", remedy)
 
 
 def _vec(value: Any, n: int, what: str, path: str | None) -> tuple[float, ...]:
@@ -134,8 +141,10 @@ class SelfCollisionPair:
 
 
 @dataclass(frozen=True)
-class SphereFitConfig:
+class SphereFitConfig(Config):
     """Parameters of the sphere fit (kept in the spec so the fit is reproducible)."""
+
+    config_error: ClassVar[type[HandSpecError]] = HandSpecError
 
     overshoot: float = 0.0028  # m, how far a sphere may reach beyond the collision geometry
     coverage: float = 0.985 # target fraction of surface samples covered, per link
@@ -261,7 +270,7 @@ class HandSpec:
                 else:
                     raise HandSpecError(p, "self_collision_pairs entries are [link, link] or "
                                         f"{{links: [a, b], spheres_a: [...], spheres_b: [...]}}, got {pair!r}")
-            fit = SphereFitConfig(**dict(data.get("sphere_fit") or {}))
+            fit = SphereFitConfig.from_dict(data.get("sphere_fit"), "sphere_fit")
             open_pose = {str(k): float(v) for k, v in (data.get("open_pose") or {}).items()}
             return cls(
                 name=str(data["name"]), mjcf=mjcf, root_body=str(data["root_body"]), spheres=spheres,
@@ -337,4 +346,4 @@ def dump_spec(spec: HandSpec, path: str | Path, header: str = "") -> None:
     """Write ``spec`` as YAML to ``path``; ``header`` lines become leading comments."""
     text = yaml.dump(spec.to_dict(), Dumper=_FlowListDumper, sort_keys=False, width=120)
     comments = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
-    Path(path).write_text(comments + text)
+    atomic_write_text(path, comments + text)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import enum
 
+from datagen.errors import DatagenError
+
 __all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError"]
 
 
@@ -36,7 +38,7 @@ class Reason(str, enum.Enum):
     UNKNOWN_SOURCE = "unknown_source"        # the source URI names no known source
 
 
-class ObjectError(Exception):
+class ObjectError(DatagenError):
     """Base error: carries a :class:`Reason` code and the thing it concerns.
 
     The message names the thing (object id, file or manifest line) and the reason, and where

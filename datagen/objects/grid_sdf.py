@@ -65,6 +65,7 @@ class GridSDF:
         return cls(values, torch.as_tensor(lo, dtype=dtype), torch.as_tensor(hi, dtype=dtype))
 
     def to(self, device) -> "GridSDF":
+        """A copy on ``device`` (this one is unchanged, like ``torch.Tensor.to``)."""
         return GridSDF(self.values.to(device), self.lo.to(device), self.hi.to(device))
 
     def distance(self, points: torch.Tensor, scale: float = 1.0) -> torch.Tensor:

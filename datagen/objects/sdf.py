@@ -18,6 +18,7 @@ scale. Outputs: distance (...) metres, negative inside; closest (..., 3) metres;
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,11 +106,13 @@ class MeshSDF:
         return cls(m.vertices, m.faces, **kw)
 
     def to(self, device) -> "MeshSDF":
+        """A copy on ``device`` (this one is unchanged, like ``torch.Tensor.to``)."""
+        out = copy.copy(self)
         for name in ("vertices", "faces", "tris", "face_n", "edge_n", "vert_n", "cells",
                      "counts", "overflow", "lo", "cell_size"):
             if getattr(self, name, None) is not None:
-                setattr(self, name, getattr(self, name).to(device))
-        return self
+                setattr(out, name, getattr(self, name).to(device))
+        return out
 
     def _pseudo_normals(self, v: np.ndarray, f: np.ndarray) -> None:
         m = trimesh.Trimesh(v, f, process=False)

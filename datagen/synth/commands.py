@@ -56,7 +56,8 @@ def _synth(args) -> int:
     import yaml
 
     from datagen.hands import load_hand
-    from datagen.synth import SynthConfig, load_task, synthesize
+    from datagen.synth import SynthConfig, synthesize
+    from datagen.tasks import load_task
     from datagen.synth.rows import result_table
 
     cfg = SynthConfig.from_dict(yaml.safe_load(Path(args.config).read_text()) if args.config else {}, where=args.config or "defaults")

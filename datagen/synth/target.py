@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -91,8 +91,6 @@ class GraspTarget:
         return d, points - d[..., None] * n, n
 
     def to(self, device) -> "GraspTarget":
-        self.sdf = self.sdf.to(device)
-        self.grid = self.grid.to(device) if self.grid is not None else None
-        self.hull_points = self.hull_points.to(device)
-        self.hull_normals = self.hull_normals.to(device)
-        return self
+        """A copy on ``device`` (this one is unchanged, like ``torch.Tensor.to``)."""
+        return replace(self, sdf=self.sdf.to(device), grid=None if self.grid is None else self.grid.to(device),
+                       hull_points=self.hull_points.to(device), hull_normals=self.hull_normals.to(device))

@@ -3,7 +3,8 @@
 A box (convex OBJ written here, normalized units) sits in front of the open Shadow hand's palm;
 each finger then closes kinematically along a fixed closing direction until its links touch
 the box (bisection on ``mj_geomDistance``). The grasp is that touching configuration, the
-pregrasp 70% of it (more open) and the squeeze ``2 * grasp - pregrasp`` (NOTES §2).
+pregrasp 70% of it (more open) and the squeeze ``2 * grasp - pregrasp`` (the successor method's
+convention, ARCHITECTURE.md "Synthesis").
 """
 
 from __future__ import annotations

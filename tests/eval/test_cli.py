@@ -51,6 +51,7 @@ def table_path(shadow, box_dir):
     return path
 
 
+@pytest.mark.slow
 def test_eval_cli_adds_columns(table_path, tmp_path):
     out = tmp_path / "evaluated.parquet"
     assert main(["eval", str(table_path), "--out", str(out)]) == 0
@@ -76,6 +77,7 @@ def test_eval_cli_reports_missing_columns(tmp_path, capsys):
     assert "missing columns" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_render_cli_writes_png(table_path, tmp_path):
     env = {**os.environ, "MUJOCO_GL": "osmesa"}
     res = subprocess.run([sys.executable, "-m", "datagen.cli", "render", str(table_path), "--out", str(tmp_path),

@@ -75,6 +75,7 @@ def test_grasp_holding_some_directions_fails(evaluator, partial):
     assert None in e.direction_success and e.sim_steps < r.sim_steps
 
 
+@pytest.mark.slow
 def test_results_are_deterministic_serial_and_threaded(shadow, evaluator, good, partial):
     for pieces, poses in (good, partial):
         a = evaluator.evaluate(pieces, poses)

@@ -7,11 +7,11 @@ import pytest
 
 from datagen.eval import EvalConfig, EvalError, TaskTest
 from datagen.eval.scene import build_scene, pieces_from_processed
-from datagen.eval.tasks import task_object, task_test_from_spec
 from datagen.objects import task_objects as T
 from datagen.objects.process import process_object
 from datagen.objects.sources import resolve
-from datagen.synth.config import ConfigError, builtin_tasks, load_task
+from datagen.errors import ConfigError
+from datagen.tasks import builtin_tasks, load_task, task_object, task_test_from_spec
 
 BENCHMARK = ("turn_handle", "turn_knob2", "turn_knob3", "lift_handbag", "lift_plate", "push_button", "pull_drawer",
              "precision_lid", "precision_key", "precision_usba")

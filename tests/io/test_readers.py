@@ -13,6 +13,9 @@ import torch
 
 from datagen.io import GraspDataset, joint_names, open_dataset, read_job, shard_paths
 
+# every test reads the session's tiny job (built by Ray-free shard runs, ~30 s)
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def raw(job_dir):

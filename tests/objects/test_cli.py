@@ -6,6 +6,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import yaml
 
 from datagen import cli
@@ -13,6 +14,7 @@ from datagen.objects import layout
 from datagen.objects.cache import clean_stale_temp
 
 
+@pytest.mark.slow
 def test_manifest_build_then_prepare_twice(tmp_path, capsys, fast_cfg):
     out = tmp_path / "manifests" / "tiny.jsonl"
     assert cli.main(["manifest", "build", "--source", "procedural:1", "--count", "3",
@@ -63,6 +65,7 @@ def test_other_packages_register_subcommands(monkeypatch, capsys):
     assert capsys.readouterr().out == "hi\n"
 
 
+@pytest.mark.slow
 def test_killed_process_leaves_no_half_entry(tmp_path):
     """SIGKILL in the middle of CoACD: no entry appears; the temp dir is cleaned later."""
     code = ("from datagen.objects.sources import iter_source\n"

@@ -14,6 +14,7 @@ def _unit(mesh):
     return mesh.apply_scale(1 / np.linalg.norm(0.5 * mesh.extents))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [lambda: trimesh.creation.box(extents=[1.0, 0.7, 1.4]),
                                   lambda: trimesh.creation.icosphere(3),
                                   lambda: trimesh.creation.torus(0.7, 0.25)], ids=["box", "sphere", "torus"])

@@ -81,6 +81,7 @@ def test_second_run_is_a_cache_hit(cache, fast_cfg):
     assert not other.cache_hit and other.entry != first.entry  # config is part of the key
 
 
+@pytest.mark.slow
 def test_pieces_are_identical_byte_for_byte_across_runs(tmp_path, fast_cfg):
     a = process_object(_ref(MUG), fast_cfg, tmp_path / "a")
     b = process_object(_ref(MUG), fast_cfg, tmp_path / "b")
@@ -131,6 +132,7 @@ def test_open_mesh_is_repaired_or_closed_by_the_pieces(tmp_path, cache, fast_cfg
     assert surf.volume == pytest.approx(0.1 * 0.06 * 0.04 * f**3, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_overlapping_parts_become_one_solid(tmp_path, cache, fast_cfg):
     a = trimesh.creation.box(extents=(0.1, 0.04, 0.04))
     b = trimesh.creation.box(extents=(0.04, 0.1, 0.04))  # a plus sign, as a soup of two boxes

@@ -48,6 +48,7 @@ def test_box_matches_analytic_sdf_at_any_scale(box):
         assert np.allclose(r.normal.numpy()[out], expected, atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scale", [0.06, 0.12])
 def test_within_1cm_error_below_half_mm_against_trimesh(mug, scale):
     sdf = MeshSDF(mug.vertices, mug.faces)  # default float32, default grid

@@ -7,7 +7,8 @@ import torch
 import trimesh
 
 from datagen.hands import load_hand
-from datagen.synth import GraspTarget, SynthConfig, TaskSpec, load_task, synthesize
+from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.tasks import TaskSpec, load_task
 from datagen.synth.init import initial_poses
 from tests.hands.conftest import hand_params
 
@@ -24,6 +25,7 @@ def box():
     {"kind": "surround"},
     {"kind": "approach", "approach": [0, 0, -1], "thumb": [1, 0, 0], "roll_deg": 10},
 ])
+@pytest.mark.slow
 def test_initial_poses_face_the_object_without_touching_it(name, init, box):
     hand = load_hand(name)
     spec = TaskSpec.from_dict({"name": "t", "init": init}).init
@@ -37,6 +39,7 @@ def test_initial_poses_face_the_object_without_touching_it(name, init, box):
     assert (clearance.amin(-1) > -0.003).float().mean() > 0.9, f"{name}: the open hand starts inside the object"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [p for p in hand_params() if p.values[0] != "shadow"])  # shadow: test_synthesize
 def test_short_force_closure_synthesis_reaches_the_surface(name, box):
     hand = load_hand(name)
@@ -86,6 +89,7 @@ def test_curl_outside_zero_one_is_a_config_error():
         TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "curl": 1.5}})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", hand_params())
 def test_aim_fingertips_puts_the_pinch_on_the_target_in_mujoco(name, box):
     """``init.aim: fingertips`` with a ``thumb`` hint: checked with MuJoCo's own kinematics of the

@@ -8,10 +8,11 @@ import torch
 import trimesh
 
 from datagen.hands import load_hand
-from datagen.synth import ConfigError, GraspTarget, SynthConfig, TaskSpec, load_task, synthesize
+from datagen.synth import ConfigError, GraspTarget, SynthConfig, synthesize
+from datagen.tasks import TaskSpec, load_task
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
-from datagen.synth.rotation import axis_angle_to_quat, matrix_to_quat, quat_multiply, quat_to_matrix
+from datagen.rotation import axis_angle_to_quat, matrix_to_quat, quat_multiply, quat_to_matrix
 from datagen.synth.rows import result_table
 from schemas import check_version
 
@@ -43,6 +44,7 @@ def fc_run(hand, box, sphere):
     return cfg, res
 
 
+@pytest.mark.slow
 def test_force_closure_synthesis_reaches_contact_without_penetration(fc_run):
     cfg, res = fc_run
     gap = res.tip_distance.abs().amax(-1)  # worst fingertip of each grasp, m
@@ -56,6 +58,7 @@ def test_force_closure_synthesis_reaches_contact_without_penetration(fc_run):
         assert (res.energies["distance"][sel].median() < 0.005**2 * 5)
 
 
+@pytest.mark.slow
 def test_task_energy_decreases_from_the_initial_pose(hand, box, fc_run):
     cfg, res = fc_run
     task = load_task("force_closure")
@@ -69,6 +72,7 @@ def test_task_energy_decreases_from_the_initial_pose(hand, box, fc_run):
     assert (e1.total < e0.total).all()
 
 
+@pytest.mark.slow
 def test_pregrasp_squeeze_relation(hand, fc_run):
     _, res = fc_run
     assert torch.equal(res.pregrasp[:, :7], res.grasp[:, :7]) and torch.equal(res.squeeze[:, :7], res.grasp[:, :7])
@@ -147,6 +151,7 @@ def test_quaternions_match_mujoco():
     assert np.allclose(prod, ref, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_rows_follow_the_schema(hand, box, sphere, fc_run, tmp_path):
     cfg, res = fc_run
     table = result_table(res, [box, sphere], hand, load_task("force_closure"), cfg)
@@ -164,7 +169,7 @@ def test_rows_follow_the_schema(hand, box, sphere, fc_run, tmp_path):
 @pytest.mark.parametrize("data, match", [
     ({"iters": 0}, "iters"),
     ({"weights": {"distance": -1}}, "distance"),
-    ({"step_size": 1}, "unknown field"),
+    ({"step_size": 1}, "unknown keys"),
     ({"task_energy_kind": "l1"}, "task_energy_kind"),
 ])
 def test_bad_configs_are_named(data, match):

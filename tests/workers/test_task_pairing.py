@@ -2,7 +2,7 @@
 
 from types import SimpleNamespace
 
-from datagen.synth.config import load_task
+from datagen.tasks import load_task
 from workers.shard import task_targets
 
 

@@ -18,6 +18,7 @@ def _case(seed, m, kind):
 FC_CASES = [(0, 4, "sphere", 0.5), (1, 5, "box", 0.5), (2, 3, "sphere", 1.0), (4, 4, "box", 1.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, m, kind, mu", FC_CASES)
 def test_epsilon_against_independent_minimization(seed, m, kind, mu):
     p, n = _case(seed, m, kind)

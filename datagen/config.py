@@ -1,0 +1,196 @@
+"""The one config helper: typed, frozen dataclasses loaded from mappings and YAML.
+
+Every config class of the library (`SynthConfig`, `EvalConfig`, `TaskSpec`, ...) is a frozen
+dataclass deriving from `Config`, which gives it
+
+- ``from_dict(data, where)``: unknown keys refused; every value checked against the field's type
+  annotation (``int``, ``float``, ``bool``, ``str``, ``X | None``, ``tuple[X, ...]``, fixed
+  ``tuple[X, Y, Z]``, ``Mapping[str, X]``, nested `Config` dataclasses); YAML lists become tuples,
+  ints become floats where a float is declared;
+- ``from_yaml(path)``, ``to_dict()`` (plain JSON/YAML types: lists, dicts, numbers, strings) and
+  ``hash()`` (sha256 of the canonical JSON of ``to_dict()``; stable across runs and machines).
+
+Bounds and cross-field rules stay in each class's ``__post_init__`` (they also guard direct
+construction in code). Errors are `ConfigError` (or the class's ``config_error``, e.g.
+`EvalError`) naming the field path and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import types
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar, TypeVar, Union
+
+import yaml
+
+from datagen.errors import ConfigError
+
+__all__ = ["Config", "from_mapping", "stable_hash", "to_plain"]
+
+C = TypeVar("C", bound="Config")
+
+
+class Config:
+    """Mixin for frozen config dataclasses (see the module docstring)."""
+
+    #: the error class raised for bad input (a `ConfigError` subclass with a ``make`` constructor)
+    config_error: ClassVar[type[ConfigError]] = ConfigError
+
+    @classmethod
+    def from_dict(cls: type[C], data: Mapping[str, Any] | None = None, where: str | None = None) -> C:
+        """Build from a mapping (e.g. parsed YAML); ``where`` prefixes every error (default: class name)."""
+        return from_mapping(cls, data, where)
+
+    @classmethod
+    def from_yaml(cls: type[C], path: str | Path) -> C:
+        """Build from a YAML file holding one mapping of this class's fields."""
+        try:
+            data = yaml.safe_load(Path(path).read_text())
+        except OSError as exc:
+            raise cls.config_error.make(str(path), f"cannot read the file: {exc}") from None
+        except yaml.YAMLError as exc:
+            raise cls.config_error.make(str(path), f"not valid YAML ({exc})") from None
+        return cls.from_dict(data, where=str(path))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as plain data (tuples as lists): ``from_dict(to_dict())`` gives an equal config."""
+        return to_plain(self)
+
+    def hash(self) -> str:
+        """sha256 (hex) of the canonical JSON of `to_dict`: equal configs, equal hashes."""
+        return stable_hash(self.to_dict())
+
+
+def to_plain(value: Any) -> Any:
+    """Dataclasses, mappings and sequences as dicts and lists (JSON/YAML-safe)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_plain(v) for v in value]
+    return value
+
+
+def stable_hash(data: Any) -> str:
+    """sha256 (hex) of ``data``'s canonical JSON (sorted keys, no whitespace)."""
+    blob = json.dumps(to_plain(data), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _error_of(cls: type) -> type[ConfigError]:
+    return getattr(cls, "config_error", ConfigError)
+
+
+def from_mapping(cls: type[C], data: Mapping[str, Any] | None, where: str | None = None) -> C:
+    """An instance of dataclass ``cls`` from ``data`` (see the module docstring)."""
+    where = where or cls.__name__
+    err = _error_of(cls)
+    if data is None:
+        data = {}
+    if not isinstance(data, Mapping):
+        raise err.make(where, f"expected a mapping of {cls.__name__} fields, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(str(k) for k in set(data) - set(fields))
+    if unknown:
+        raise err.make(where, f"unknown keys {unknown}", f"known: {sorted(fields)}")
+    hints = typing.get_type_hints(cls)
+    kwargs = {k: _coerce(hints.get(k, Any), v, f"{where}.{k}", err) for k, v in data.items()}
+    missing = sorted(k for k, f in fields.items() if k not in kwargs
+                     and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+    if missing:
+        raise err.make(where, f"missing required field(s) {missing}")
+    return cls(**kwargs)
+
+
+def _describe(tp: Any) -> str:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (Union, types.UnionType):
+        return " or ".join(_describe(a) for a in args)
+    if tp is type(None):
+        return "null"
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_describe(args[0])}"
+        return f"a list of {len(args)} ({', '.join(_describe(a) for a in args)})"
+    if origin in (dict, Mapping, typing.Mapping) or tp in (dict, Mapping):
+        return "a mapping"
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return f"a mapping of {tp.__name__} fields"
+    return {bool: "true or false", int: "an integer", float: "a number", str: "a string"}.get(tp, str(tp))
+
+
+def _coerce(tp: Any, v: Any, thing: str, err: type[ConfigError]) -> Any:
+    """``v`` checked against annotation ``tp`` (lists -> tuples, ints -> floats)."""
+    if tp is Any:
+        return v
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+
+    def bad(extra: str = "") -> ConfigError:
+        return err.make(thing, f"must be {_describe(tp)}, got {v!r}", extra)
+
+    if origin in (Union, types.UnionType):
+        if v is None and type(None) in args:
+            return None
+        first: ConfigError | None = None
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _coerce(a, v, thing, err)
+            except ConfigError as exc:
+                first = first or exc
+        # one non-null alternative: its own (more precise) message; several: name them all
+        if first is not None and sum(a is not type(None) for a in args) == 1:
+            raise first
+        raise bad()
+    if tp is type(None):
+        if v is not None:
+            raise bad()
+        return None
+    if tp is bool:
+        if not isinstance(v, bool):
+            raise bad()
+        return v
+    if tp is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise bad()
+        return v
+    if tp is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            hint = "YAML reads 1e4 as a string: write 1.0e4" if isinstance(v, str) else ""
+            raise bad(hint)
+        return float(v)
+    if tp is str:
+        if not isinstance(v, str):
+            raise bad()
+        return v
+    if origin is tuple:
+        if not isinstance(v, (list, tuple)):
+            raise bad()
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(args[0], x, f"{thing}[{i}]", err) for i, x in enumerate(v))
+        if len(v) != len(args):
+            raise bad()
+        return tuple(_coerce(a, x, f"{thing}[{i}]", err) for i, (a, x) in enumerate(zip(args, v)))
+    if origin in (dict, Mapping) or tp in (dict, Mapping):
+        if not isinstance(v, Mapping):
+            raise bad()
+        vt = args[1] if len(args) == 2 else Any
+        return {k: _coerce(vt, x, f"{thing}.{k}", err) for k, x in v.items()}
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        if isinstance(v, tp):
+            return v
+        if not isinstance(v, Mapping):
+            raise bad()
+        return from_mapping(tp, v, thing)
+    if origin is list or tp is list:
+        if not isinstance(v, (list, tuple)):
+            raise bad()
+        return list(v)
+    return v

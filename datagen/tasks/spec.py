@@ -1,0 +1,99 @@
+"""A task as data: its task wrench space, its fingertips, its initial hand pose, its test.
+
+A task YAML (``datagen/tasks/specs/<name>.yaml`` for the built-in ones) is one mapping of
+`TaskSpec` fields; ``init`` is an `InitConfig` mapping (read by `datagen.synth.init`) and
+``eval`` the task's physical test (parsed by `datagen.tasks.evaluation`, read by
+`datagen.eval`). Synthesis and evaluation both read tasks from here, so neither reaches into the
+other.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from datagen.config import Config
+from datagen.errors import ConfigError
+
+__all__ = ["SPEC_DIR", "InitConfig", "TaskSpec", "builtin_tasks", "load_task"]
+
+SPEC_DIR = Path(__file__).parent / "specs"
+
+
+@dataclass(frozen=True)
+class InitConfig(Config):
+    """Initial hand poses (see :mod:`datagen.synth.init`). Vectors are in the object frame."""
+
+    kind: str = "surround"  #: "surround" (palm faces the object from its hull), "above" or "approach"
+    distance_m: tuple[float, float] = (0.03, 0.06)  #: palm distance from the convex hull, uniform range
+    roll_deg: float = 180.0  #: jitter about the approach axis, +-
+    tilt_deg: float = 15.0  #: jitter of the approach axis, +-
+    offset_m: float = 0.01  #: lateral jitter of the palm origin, +-
+    approach: tuple[float, float, float] = (0.0, 0.0, -1.0)  #: "approach": palm approach direction ("above": -z)
+    thumb: tuple[float, float, float] | None = None  #: "approach": preferred thumb direction (None: random roll)
+    target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm (or the fingertips, see aim) aims at, m
+    curl: float = 0.0  #: fingers start this fraction (0..1) of the way from open to flexed (a hook)
+    aim: str = "palm"  #: "approach": what lands on target_m, "palm" (palm origin) or "fingertips" (task tips' centre)
+
+    def __post_init__(self):
+        if self.kind not in ("surround", "above", "approach"):
+            raise ConfigError(f"init.kind must be 'surround', 'above' or 'approach', got {self.kind!r}")
+        if self.aim not in ("palm", "fingertips"):
+            raise ConfigError(f"init.aim must be 'palm' or 'fingertips', got {self.aim!r}")
+        if not (isinstance(self.curl, (int, float)) and 0.0 <= self.curl <= 1.0):
+            raise ConfigError(f"init.curl must be a number in [0, 1], got {self.curl!r}")
+        lo, hi = self.distance_m
+        if not 0 <= lo <= hi:
+            raise ConfigError(f"init.distance_m must be an increasing pair >= 0, got {self.distance_m}")
+        for name in ("approach", "thumb", "target_m"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if len(v) != 3 or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in v):
+                raise ConfigError(f"init.{name} must be 3 finite numbers, got {v!r}")
+            if name != "target_m" and math.hypot(*v) < 1e-9:
+                raise ConfigError(f"init.{name} must be a non-zero direction, got {v!r}")
+        if self.thumb is not None:
+            a, t = self.approach, self.thumb
+            cos = abs(sum(x * y for x, y in zip(a, t))) / (math.hypot(*a) * math.hypot(*t))
+            if cos > 0.99:
+                raise ConfigError(f"init.thumb {t} is (nearly) parallel to init.approach {a}")
+
+
+@dataclass(frozen=True)
+class TaskSpec(Config):
+    """A task as data: the TWS (w_t, gamma), which fingertips make contact, the initial pose, the test."""
+
+    name: str
+    w_t: tuple[float, ...] = (0, 0, 0, 0, 0, 1)  #: task wrench direction [force, torque] (object frame)
+    gamma_deg: float = 180.0  #: TWS half-angle, degrees (180: force closure)
+    fingers: tuple[str, ...] | str = "all"  #: the contact fingertips (hand finger names) or "all"
+    init: InitConfig = field(default_factory=InitConfig)
+    eval: str | dict = "six_direction"  #: "six_direction" or the task test mapping (see datagen.tasks.evaluation)
+
+    def __post_init__(self):
+        object.__setattr__(self, "w_t", tuple(float(x) for x in self.w_t))  # equal specs, equal hashes
+        if isinstance(self.fingers, list):
+            object.__setattr__(self, "fingers", tuple(self.fingers))
+        if len(self.w_t) != 6 or not any(abs(float(x)) > 0 for x in self.w_t):
+            raise ConfigError(f"task {self.name!r}: w_t must be 6 numbers, not all zero, got {self.w_t}")
+        if not 0 < self.gamma_deg <= 180:
+            raise ConfigError(f"task {self.name!r}: gamma_deg must lie in (0, 180], got {self.gamma_deg}")
+
+
+def builtin_tasks() -> list[str]:
+    """Names of the built-in tasks (``datagen/tasks/specs/*.yaml``)."""
+    return sorted(p.stem for p in SPEC_DIR.glob("*.yaml"))
+
+
+def load_task(name_or_path: str | Path) -> TaskSpec:
+    """A built-in task by name (``force_closure``, ...) or a YAML task file."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = SPEC_DIR / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"unknown task {name_or_path!r}", f"built-in tasks: {builtin_tasks()}, or pass a YAML file")
+    if not path.is_file():
+        raise ConfigError(f"task file {path} does not exist")
+    return TaskSpec.from_yaml(path)

@@ -1,0 +1,45 @@
+"""Tasks as data: built-in YAMLs load, a YAML task round-trips, tasks pair with their objects."""
+
+from types import SimpleNamespace
+
+import pytest
+import yaml
+
+from datagen.errors import ConfigError
+from datagen.tasks import (SPEC_DIR, InitConfig, TaskSpec, builtin_tasks, load_task, task_object_id,
+                           task_targets, task_test_from_spec)
+
+
+def test_builtin_specs_are_package_files_and_all_load():
+    names = builtin_tasks()
+    assert "force_closure" in names and len(names) == len(list(SPEC_DIR.glob("*.yaml")))
+    for n in names:
+        spec = load_task(n)
+        assert spec.name == n and len(spec.w_t) == 6 and isinstance(spec.init, InitConfig)
+
+
+def test_a_yaml_task_round_trips(tmp_path):
+    spec = TaskSpec(name="t", w_t=(0, 0, 1, 0, 0, 0), gamma_deg=30.0, fingers=("th", "ff"),
+                    init=InitConfig(kind="approach", thumb=(1.0, 0.0, 0.0)),
+                    eval={"test": "task", "object": "knob2"})
+    p = tmp_path / "t.yaml"
+    p.write_text(yaml.safe_dump(spec.to_dict()))
+    again = load_task(p)
+    assert again == spec and again.hash() == spec.hash()
+    assert task_test_from_spec(again).joint == "hinge"  # knob2's own joint
+
+
+def test_unknown_task_and_missing_file_are_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match="unknown task 'juggle'") as err:
+        load_task("juggle")
+    assert "force_closure" in err.value.remedy
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_task(tmp_path / "none.yaml")
+
+
+def test_tasks_pair_with_their_objects():
+    targets = [SimpleNamespace(object_id=i) for i in ("task-knob2", "task-drawer", "proc-s0-000001")]
+    assert task_object_id(load_task("turn_knob2")) == "task-knob2"
+    assert [t.object_id for t in task_targets(load_task("pull_drawer"), targets)] == ["task-drawer"]
+    assert task_targets(load_task("force_closure"), targets) == targets
+    assert task_targets(load_task("precision_key"), targets) == []  # its object is not among them
