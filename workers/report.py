@@ -1,7 +1,7 @@
 """``datagen report JOB_DIR``: a dataset card (JOB_DIR/README.md) with tables and rendered grasps.
 
-Rendering uses MuJoCo's offscreen GL (``MUJOCO_GL``, default ``osmesa`` on a machine without a
-display); when no context can be opened the card says so instead of showing pictures.
+Rendering uses MuJoCo's offscreen GL, chosen by `datagen.gl.select_backend` (``MUJOCO_GL`` if set,
+else egl, then osmesa); when no backend works the card says so instead of showing pictures.
 """
 
 from __future__ import annotations
@@ -42,7 +42,12 @@ def _render(job: JobDir, rows: pa.Table, n: int) -> tuple[list[str], str]:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    os.environ.setdefault("MUJOCO_GL", "osmesa")
+    from datagen.gl import GLUnavailable, select_backend
+
+    try:
+        select_backend()  # sets MUJOCO_GL, inherited by the rendering process
+    except GLUnavailable as exc:
+        return [], f"No grasp pictures: {exc}. Rerun `datagen report` once a backend works."
     ok = [i for i, s in enumerate(rows["success"].to_pylist()) if s] or list(range(rows.num_rows))
     picked = rows.take(ok[:n]).to_pylist()
     with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
@@ -69,7 +74,7 @@ def _render_rows(path: str, picked: list[dict]) -> tuple[list[str], str]:
     except Exception as exc:  # noqa: BLE001 - no GL is a note in the card, not an error
         return [], (f"No grasp pictures: no offscreen GL context could be opened "
                     f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {type(exc).__name__}: {exc}. "
-                    "Install libosmesa6 and PyOpenGL (or use MUJOCO_GL=egl on a GPU) and rerun `datagen report`.")
+                    "`python -m datagen.gl` names a backend that works; rerun `datagen report`.")
 
 
 def write_report(path: str | Path, renders: int = 3) -> Path:

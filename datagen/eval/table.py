@@ -10,7 +10,8 @@ Input (Parquet, one row per grasp; other columns are kept as they are):
                     list<float32> (7 + J): [x y z qw qx qy qz] + joints in the hand MJCF's joint
                     order, object frame (metres, radians)
     object_path     string  the processed object's cache entry directory (``ProcessedObject.entry``:
-                    meta.json, coacd/ pieces), absolute or relative to the table's directory
+                    meta.json, coacd/ pieces): absolute, or relative to the job directory for a
+                    job's shards and to the table's own directory otherwise (`table_base`)
     w_t             list<float32> (6), optional: the task wrench; used by task tests (see
                     `Evaluator.evaluate`), ignored by the six-direction test
 
@@ -32,7 +33,7 @@ from .evaluate import Evaluator, GraspResult
 from .scene import ObjectPieces, pieces_from_processed
 
 __all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "evaluate_table",
-           "read_grasps", "row_poses", "row_pieces"]
+           "read_grasps", "row_poses", "row_pieces", "table_base"]
 
 EVAL_SCHEMA_VERSION = 1
 INPUT_COLUMNS = ("object_id", "object_scale", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
@@ -59,12 +60,37 @@ EVAL_COLUMNS: dict[str, tuple[pa.DataType, str]] = {
 }
 
 
+def table_base(path: str | Path) -> Path:
+    """The directory relative ``object_path`` values of the table at ``path`` are resolved against:
+    the job directory when ``path`` is a job directory or lies inside one (a shard
+    ``JOB/shards/part-NNNNN.parquet``: rows name ``objects/<entry>`` relative to ``JOB``), else the
+    table's own directory."""
+    from datagen.io import layout
+
+    path = Path(path).resolve()
+    for d in ([path] if path.is_dir() else []) + list(path.parents):
+        if (d / layout.JOB_JSON).is_file():
+            return d
+    return path if path.is_dir() else path.parent
+
+
 def read_grasps(path: str | Path) -> pa.Table:
-    """Read a grasp table and check its columns (raises `EvalError` naming the missing ones)."""
+    """Read a grasp table (a Parquet file, or a job directory: its finished shards) and check its
+    columns (raises `EvalError` naming the missing ones). Resolve its rows' ``object_path`` against
+    `table_base` (path)."""
     path = Path(path)
-    if not path.is_file():
+    if path.is_dir():
+        from datagen.io import read_job
+
+        try:
+            table = read_job(path)
+        except FileNotFoundError as exc:
+            raise EvalError(str(path), f"not a grasp table: {exc}",
+                            "pass a Parquet grasp table or a job directory with finished shards") from None
+    elif path.is_file():
+        table = pq.read_table(path)
+    else:
         raise EvalError(str(path), "grasp table not found")
-    table = pq.read_table(path)
     missing = [c for c in INPUT_COLUMNS if c not in table.column_names]
     if missing:
         raise EvalError(str(path), f"missing columns {missing}", f"a grasp table needs {list(INPUT_COLUMNS)}")
