@@ -74,7 +74,7 @@ SOURCE ?= procedural
 DATASET_ARGS ?=
 
 dataset: $(STAMP)
-	$(PY) -m datagen.cli run --out $(OUT) --scale $(SCALE) --hand $(HAND) --tasks $(TASKS) \
+	$(PY) -m datagen.cli run --out $(OUT) --objects $(SCALE) --hand $(HAND) --tasks $(TASKS) \
 		--source $(SOURCE) $(DATASET_ARGS)
 
 bench-pipeline: $(STAMP)

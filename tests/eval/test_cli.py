@@ -124,3 +124,56 @@ def test_wrong_mujoco_gl_does_not_break_simulation(table_path, tmp_path, gl):
     assert pq.read_table(out).column("success").to_pylist() == [True, False, True]
     if gl != "osmesa":
         assert f"MUJOCO_GL={gl!r} is not a backend mujoco knows" in res.stderr
+
+
+def _all_parsers():
+    import argparse
+
+    from datagen.cli import build_parser
+
+    todo, seen = [("datagen", build_parser())], []
+    while todo:
+        name, p = todo.pop()
+        seen.append((name, p))
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                todo += [(f"{name} {n}", sp) for n, sp in a.choices.items()]
+    return seen
+
+
+def test_every_option_has_help_and_shows_its_default():
+    import argparse
+
+    missing, hidden = [], []
+    for name, p in _all_parsers():
+        text = p.format_help()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction) or a.help == argparse.SUPPRESS:
+                continue
+            if a.help is None or not a.help.strip():
+                missing.append(f"{name} {'/'.join(a.option_strings) or a.dest}")
+            elif a.option_strings and a.default not in (None, False, "==SUPPRESS==") and "default" not in a.help:
+                if f"(default: {a.default})" not in " ".join(text.split()):
+                    hidden.append(f"{name} {a.option_strings[0]}")
+    assert not missing, f"options without help: {missing}"
+    assert not hidden, f"defaults not shown: {hidden}"
+
+
+def test_version_and_listings(capsys):
+    import datagen
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"datagen {datagen.__version__}"
+    from datagen.hands.load import BUILTIN_HANDS
+    from datagen.synth.config import builtin_tasks
+
+    assert main(["hands"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == list(BUILTIN_HANDS)
+    assert all(len(ln.split(None, 2)) == 3 for ln in lines)  # name, availability, description
+    assert main(["tasks"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == builtin_tasks()
+    knob = next(ln for ln in lines if ln.startswith("turn_knob2 "))
+    assert "object knob2" in knob and "Turn a round knob" in knob
