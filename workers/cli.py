@@ -93,7 +93,8 @@ def _status(args) -> int:
 def register_report(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="write a dataset card (JOB_DIR/README.md) with rendered grasps")
     p.add_argument("job", help="job directory")
-    p.add_argument("--renders", type=int, default=3, help="grasps to render (0: none)")
+    p.add_argument("--renders", type=int, default=6,
+                   help="grasps to draw, successes and failures alternately, across objects (0: none)")
     p.set_defaults(func=_report)
 
 

@@ -7,7 +7,8 @@ Two entry points keep that from hurting:
 - :func:`drop_unusable` (run by ``import datagen``, cheap: no subprocess, nothing at all when the
   variable is unset) removes a ``MUJOCO_GL`` that would make ``import mujoco`` fail, with a
   warning, so simulation and every non-rendering command keep working;
-- :func:`select_backend` (run by the rendering commands before they import mujoco) keeps a
+- :func:`select_backend` (run by the rendering commands before they import mujoco, or before
+  they start a rendering child process) keeps a
   usable ``MUJOCO_GL`` as the user set it, else tries ``egl`` then ``osmesa``, each by rendering
   one small frame in a subprocess, sets the first that works, and raises :class:`GLUnavailable`
   naming what each backend lacks when none does.
@@ -97,11 +98,11 @@ def probe(backend: str, timeout: float = 120.0) -> str:
 def select_backend() -> str:
     """The ``MUJOCO_GL`` backend for rendering in this process, set in ``os.environ`` (so child
     processes inherit it). A ``MUJOCO_GL`` the user set is kept; unset, ``egl`` then ``osmesa``
-    are probed. If mujoco is already imported its choice is final and is returned as it is.
-    Raises :class:`GLUnavailable` when no backend renders."""
+    are probed. If mujoco is already imported, this process keeps the backend it was imported with
+    (render in a child process then). Raises :class:`GLUnavailable` when no backend renders."""
     global _selected
-    if "MUJOCO_GL" in os.environ or "mujoco" in sys.modules:
-        return os.environ.get("MUJOCO_GL", "")
+    if "MUJOCO_GL" in os.environ:
+        return os.environ["MUJOCO_GL"]
     if _selected is None:
         reasons = {b: probe(b) for b in BACKENDS[:1]}
         for b in BACKENDS[1:]:

@@ -40,7 +40,7 @@ def table_path(shadow, box_dir):
     entry = _processed_entry(pieces, box_dir)
     far = good.copy()
     far[:, 1] += 0.5
-    rows = {"object_id": ["box"] * 3, "object_scale": [pieces.scale] * 3, "hand": ["shadow"] * 3,
+    rows = {"object_id": ["box"] * 3, "object_scale_m": [pieces.scale] * 3, "hand": ["shadow"] * 3,
             "task": ["force_closure", "force_closure", "turn_knob"], "object_path": ["entry_box"] * 3,
             "keep_me": [7, 8, 9], "w_t": [[0, 0, 0, 0, 0, 1.0]] * 3}
     for k, name in enumerate(("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")):
