@@ -29,6 +29,8 @@ REGISTRARS: dict[str, str] = {
     "run": "workers.cli:register_run",
     "status": "workers.cli:register_status",
     "report": "workers.cli:register_report",
+    "export": "datagen.interop.commands:register_export",
+    "import": "datagen.interop.commands:register_import",
 }
 # domain errors printed as one line with exit status 2 (module:class, looked up only if imported)
 _ERRORS = ("datagen.objects.errors:ObjectError", "workers.job:JobError", "datagen.gl:GLUnavailable")
