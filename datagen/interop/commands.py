@@ -10,7 +10,7 @@ from pathlib import Path
 __all__ = ["register_export", "register_import"]
 
 FORMATS_OUT = ("dexgraspbench",)
-FORMATS_IN = ("dexgraspbench",)
+FORMATS_IN = ("dexgraspbench", "bodex")
 
 
 def register_export(sub: argparse._SubParsersAction) -> None:
@@ -53,7 +53,9 @@ def register_import(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--hand", required=True, help="our name of the peer's hand (shadow_e3m5, allegro, leap)")
     p.add_argument("--out", required=True, help="grasp table to write (Parquet); objects go to its objects/ folder")
     p.add_argument("--root", default=None,
-                   help="directory relative object paths in the files are resolved against (default: the current one)")
+                   help="dexgraspbench: directory relative obj_path values are resolved against (default: the "
+                        "current one); bodex: BODex's src/curobo/content directory, for scene paths written "
+                        "on another machine")
     p.add_argument("--task", default="force_closure", help="task recorded on the rows (the test datagen eval runs)")
     p.set_defaults(func=_import)
 

@@ -25,7 +25,7 @@ import pyarrow as pa
 from .frames import PeerHand, from_peer, matrix_to_pose7, pose7_to_matrix, to_peer
 from .objects import export_object, import_object
 
-__all__ = ["PEER_HANDS", "export_grasps", "read_grasp_files"]
+__all__ = ["PEER_HANDS", "export_grasps", "grasp_columns", "peer_hand", "read_grasp_files", "records"]
 
 _SHADOW_JOINTS = tuple(f"rh_{f}J{j}" for f, n in (("FF", 4), ("MF", 4), ("RF", 4), ("LF", 5), ("TH", 5))
                        for j in range(n, 0, -1))
@@ -87,14 +87,10 @@ def export_grasps(table: pa.Table, base: Path, out: Path, hand) -> list[Path]:
     return written
 
 
-def read_grasp_files(paths: list[Path], hand, objects_dir: Path, root: Path | None = None) -> dict[str, list]:
-    """Columns (of the ``grasps`` schema) of DexGraspBench grasp files ``paths`` of ``hand`` (a
-    float64 `HandModel`); their objects become processed entries under ``objects_dir``, named by
-    ``object_path`` relative to ``objects_dir.parent``. Relative ``obj_path`` values are resolved
-    against ``root`` (DexGraspBench's working directory; default: the current one)."""
-    peer = peer_hand(hand.name)
-    objects: dict[str, tuple[str, np.ndarray, float]] = {}
-    cols: dict[str, list] = {k: [] for k in ("object_id", "object_scale_m", "object_path", "source", *POSE_KEYS)}
+def records(paths: list[Path], root: Path | None = None):
+    """Yield one grasp per DexGraspBench file: {source, obj_folder, obj_scale, obj_pose (7,),
+    poses (3, 7 + joints)}. Relative ``obj_path`` values are resolved against ``root``
+    (DexGraspBench's working directory; default: the current one)."""
     for p in paths:
         d = np.load(p, allow_pickle=True).item()
         missing = [k for k in ("obj_path", "obj_scale", "obj_pose", *POSE_KEYS) if k not in d]
@@ -102,6 +98,25 @@ def read_grasp_files(paths: list[Path], hand, objects_dir: Path, root: Path | No
             raise ValueError(f"{p}: not a DexGraspBench grasp file (no {missing})")
         folder = Path(str(d["obj_path"]))
         folder = folder if folder.is_absolute() else (Path(root) if root else Path.cwd()) / folder
+        yield {"source": str(p), "obj_folder": folder, "obj_scale": float(d["obj_scale"]),
+               "obj_pose": np.asarray(d["obj_pose"], dtype=np.float64),
+               "poses": np.stack([np.asarray(d[k], dtype=np.float64) for k in POSE_KEYS])}
+
+
+def read_grasp_files(paths: list[Path], hand, objects_dir: Path, root: Path | None = None) -> dict[str, list]:
+    """Columns (see `grasp_columns`) of DexGraspBench grasp files ``paths`` of ``hand``."""
+    return grasp_columns(records(paths, root), hand, peer_hand(hand.name), objects_dir)
+
+
+def grasp_columns(recs, hand, peer: PeerHand, objects_dir: Path) -> dict[str, list]:
+    """Columns (object_id, object_scale_m, object_path, source, the three poses) of peer grasp
+    records (see `records`) of ``hand`` (a float64 `HandModel`), posed in our object frame; their
+    objects become processed entries under ``objects_dir``, named by ``object_path`` relative to
+    ``objects_dir.parent``."""
+    objects: dict[str, tuple] = {}
+    cols: dict[str, list] = {k: [] for k in ("object_id", "object_scale_m", "object_path", "source", *POSE_KEYS)}
+    for r in recs:
+        folder = Path(r["obj_folder"])
         key = str(folder.resolve())
         if key not in objects:
             oid = folder.name
@@ -109,16 +124,16 @@ def read_grasp_files(paths: list[Path], hand, objects_dir: Path, root: Path | No
             centre, factor = import_object(folder, oid, entry)
             objects[key] = (oid, centre, factor, entry.relative_to(objects_dir.parent).as_posix())
         oid, centre, factor, rel = objects[key]
-        scale = float(d["obj_scale"])
+        scale = r["obj_scale"]
         # peer world -> object frame (peer mesh units x scale) -> ours (bounding-box centre at the origin)
-        to_obj = np.linalg.inv(pose7_to_matrix(np.asarray(d["obj_pose"], dtype=np.float64)))
+        to_obj = np.linalg.inv(pose7_to_matrix(r["obj_pose"]))
         to_obj[:3, 3] -= centre * scale
-        ours = from_peer(hand, peer, np.stack([np.asarray(d[k], dtype=np.float64) for k in POSE_KEYS]))
+        ours = from_peer(hand, peer, r["poses"])
         ours[:, :7] = matrix_to_pose7(to_obj @ pose7_to_matrix(ours[:, :7]))
         cols["object_id"].append(oid)
         cols["object_scale_m"].append(scale / factor)
         cols["object_path"].append(rel)
-        cols["source"].append(str(p))
+        cols["source"].append(r["source"])
         for j, k in enumerate(POSE_KEYS):
             cols[k].append(ours[j])
     return cols

@@ -1,4 +1,4 @@
-"""DexGraspBench export and import, checked by forward kinematics: the peer's hand (rebuilt from
+"""DexGraspBench export and import and BODex import, checked by forward kinematics: the peer's hand (rebuilt from
 the Menagerie MJCFs by MuJoCo, tests/interop/peer_models.py) posed from an exported file puts
 every fingertip within 1 mm of where this project's kinematics put it; imported files come back
 to the same fingertips in our object frame."""
@@ -211,3 +211,64 @@ def test_export_against_the_peers_own_xml(name, hands, exported):
             err = np.linalg.norm(_peer_tips(model, hand, d[k]) - _our_tips(hand, rows[d["grasp_id"]][k]), axis=-1)
             worst = max(worst, err.max())
     assert worst < TOL_M, f"{name}: fingertips {worst * 1000:.3f} mm apart"
+
+
+def _rot(q_wxyz) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q_wxyz, dtype=np.float64)
+    return Rotation.from_quat(q[[1, 2, 3, 0]] / np.linalg.norm(q)).as_matrix()
+
+
+def _bodex_pose(name: str, dgb: np.ndarray) -> np.ndarray:
+    """A DexGraspBench pose back in BODex's raw convention: the inverse of DexGraspBench's own
+    BODex conversion (its src/task/convert_format.py: Shadow's thumb block first and the palm
+    0.034 m up z, Allegro's palm rotated by quat (0 1 0 1), LEAP's by (0 1 0 0) and 0.1 m up z)."""
+    from scipy.spatial.transform import Rotation
+
+    p, R = dgb[:3], _rot(dgb[3:7])
+    joints = dgb[7:]
+    if name == "shadow_e3m5":
+        p, joints = p + R @ [0, 0, 0.034], np.concatenate([joints[17:], joints[:17]])
+    elif name == "allegro":
+        R = R @ _rot([0, 1, 0, 1])
+    else:
+        p, R = p + R @ [0, 0, 0.1], R @ _rot([0, 1, 0, 0])
+    q = Rotation.from_matrix(R).as_quat()[[3, 0, 1, 2]]
+    return np.concatenate([p, q, joints])
+
+
+@pytest.mark.parametrize("name", HANDS)
+def test_bodex_import(name, hands, exported, tmp_path):
+    """BODex raw files (one per object: robot_pose (1, N, 3, 7 + J), a scene config it names by a
+    path inside BODex's tree) import to the fingertips of the grasps they were made from."""
+    hand, (rows, out) = hands[name], exported[name]
+    files = sorted((out / "graspdata").rglob("*.npy"))
+    data = [np.load(f, allow_pickle=True).item() for f in files]
+    content = tmp_path / "content"
+    (content / "scene_cfg").mkdir(parents=True)
+    obj = Path(data[0]["obj_path"])
+    scene = {"task": {"obj_name": "box"},
+             "scene": {"box": {"file_path": str(Path("..") / "objs" / "box" / "urdf" / "coacd.urdf"),
+                               "scale": [data[0]["obj_scale"]], "pose": np.array([0, 0, 0, 1.0, 0, 0, 0])}}}
+    import shutil
+
+    shutil.copytree(obj, content / "objs" / "box")
+    np.save(content / "scene_cfg" / "box.npy", scene, allow_pickle=True)
+    robot_pose = np.array([[[_bodex_pose(name, d[k].astype(np.float64)) for k in POSES] for d in data]])
+    raw = tmp_path / "raw" / "box_grasp.npy"
+    raw.parent.mkdir()
+    np.save(raw, {"robot_pose": robot_pose.astype(np.float32),
+                  "scene_path": ["/elsewhere/BODex/src/curobo/content/scene_cfg/box.npy"]}, allow_pickle=True)
+    table = tmp_path / "bodex.parquet"
+    args = ["import", "--format", "bodex", str(raw), "--hand", name, "--out", str(table)]
+    assert main(args) == 2  # the scene path is BODex's: found only under --root
+    assert main(args + ["--root", str(content)]) == 0
+    got = pq.read_table(table).to_pylist()
+    assert len(got) == len(data)
+    worst = 0.0
+    for r, d in zip(got, data):
+        ref = rows[d["grasp_id"]]
+        for key in POSES:
+            worst = max(worst, np.linalg.norm(_our_tips(hand, r[key]) - _our_tips(hand, ref[key]), axis=-1).max())
+    assert worst < TOL_M, f"{name}: BODex fingertips {worst * 1000:.3f} mm from the originals"
