@@ -147,7 +147,8 @@ def _columns_section(rows: pa.Table | None) -> list[str]:
           "(`_m`, `_m2`, `_rad`, `_deg`); `success` is the MuJoCo verdict, `synth_usable` only the synthesis-side "
           "pre-check. Declared in `schemas/evaluated.json`.", ""]
     md += _table(["column", "type", "unit", "frame", "meaning"],
-                 [[f"`{c['name']}`", c["type"], c["unit"], c["frame"], c["meaning"]] for c in column_table("evaluated")])
+                 [[f"`{c['name']}`", c["type"], c["unit"], c["frame"], c["meaning"]]
+                  for c in column_table("evaluated")])
     if rows is not None and "joint_names" in rows.column_names and rows.num_rows:
         names = rows["joint_names"][0].as_py()
         md += [f"Joints of `{rows['hand'][0].as_py()}` (qpos[7:] in this order): "
@@ -186,10 +187,11 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
         md += _table(["task", "object_scale_m", "grasps", "success rate"],
                      [[t, sc, n, f"{k / n:.1%}"] for (t, sc), (n, k) in sorted(groups.items())])
         if "split" in rows.column_names:
+            splits, objs = rows["split"].to_pylist(), rows["object_id"].to_pylist()
             md += ["### By split", ""]
             md += _table(["split", "grasps", "objects"],
-                         [[sp, n, len(set(o for o, x in zip(rows["object_id"].to_pylist(), rows["split"].to_pylist())
-                                          if x == sp))] for sp, n in sorted(Counter(rows["split"].to_pylist()).items())])
+                         [[sp, n, len({o for o, x in zip(objs, splits) if x == sp})]
+                          for sp, n in sorted(Counter(splits).items())])
         md += ["### Grasp outcomes (reason codes)", ""]
         md += _table(["reason", "grasps"], [[k, v] for k, v in s["eval_reasons"].items()])
         md += ["### Metrics (successful grasps)", ""]

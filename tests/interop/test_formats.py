@@ -1,7 +1,7 @@
-"""DexGraspBench export and import and BODex import, checked by forward kinematics: the peer's hand (rebuilt from
-the Menagerie MJCFs by MuJoCo, tests/interop/peer_models.py) posed from an exported file puts
-every fingertip within 1 mm of where this project's kinematics put it; imported files come back
-to the same fingertips in our object frame."""
+"""DexGraspBench export and import, and BODex import, checked by forward kinematics: the peer's
+hand (rebuilt from the Menagerie MJCFs by MuJoCo, tests/interop/peer_models.py) posed from an
+exported file puts every fingertip within 1 mm of where this project's kinematics put it;
+imported files come back to the same fingertips in our object frame."""
 
 from __future__ import annotations
 
