@@ -40,3 +40,16 @@ def test_card(job_dir):
         assert len(captions) == 2 and all("object `" in c and "task `" in c for c in captions)
     else:
         assert "No grasp pictures" in card
+
+
+@pytest.mark.mujoco
+def test_hugging_face_loads_the_job_directory_by_its_card(job_dir, tmp_path, monkeypatch):
+    """The front matter's data_files select the shards (not failures.parquet) when the job
+    directory itself is loaded, as a dataset repository would be."""
+    datasets = pytest.importorskip("datasets")
+    monkeypatch.setenv("HF_DATASETS_OFFLINE", "1")
+    write_report(job_dir, renders=0)
+    d = datasets.load_dataset(str(job_dir), split="train", cache_dir=str(tmp_path / "hf"))
+    ref = [r for p in sorted((job_dir / "shards").glob("*.parquet")) for r in pq.read_table(p).to_pylist()]
+    assert sorted(d["grasp_id"]) == sorted(r["grasp_id"] for r in ref)
+    assert d[0]["joint_names"] == ref[0]["joint_names"]
