@@ -147,7 +147,7 @@ def _columns_section(rows: pa.Table | None) -> list[str]:
           "(`_m`, `_m2`, `_rad`, `_deg`); `success` is the MuJoCo verdict, `synth_usable` only the synthesis-side "
           "pre-check. Declared in `schemas/evaluated.json`.", ""]
     md += _table(["column", "type", "unit", "frame", "meaning"],
-                 [[f"`{c['name']}`", c["type"], c["unit"], c["frame"], c["meaning"]]
+                 [[f"`{c['name']}`", f"`{c['type']}`", c["unit"], c["frame"], c["meaning"]]
                   for c in column_table("evaluated")])
     if rows is not None and "joint_names" in rows.column_names and rows.num_rows:
         names = rows["joint_names"][0].as_py()

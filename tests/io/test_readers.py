@@ -32,6 +32,8 @@ def test_read_job_matches_the_files(job_dir, raw):
     names = joint_names(job_dir)
     assert len(names) + 7 == len(raw[0]["grasp_qpos"])
     assert names == json.loads(pq.read_schema(shard_paths(job_dir)[0]).metadata[b"datagen.joint_names"])
+    assert all(r["joint_names"] == names for r in raw)  # each row names its joints
+    assert {r["split"] for r in raw} <= {"train", "test"}
 
 
 def test_unfinished_shards_are_not_read(job_dir, tmp_path):
