@@ -21,6 +21,8 @@ from datagen.cli import main
 from datagen.hands.load import available_hands
 from datagen.objects import layout
 
+from tests.workers.conftest import cache_dir, mesh_source  # noqa: F401 - fixtures
+
 from .peer_models import PEER_FACTS, peer_model
 
 pytestmark = pytest.mark.mujoco
@@ -272,3 +274,37 @@ def test_bodex_import(name, hands, exported, tmp_path):
         for key in POSES:
             worst = max(worst, np.linalg.norm(_our_tips(hand, r[key]) - _our_tips(hand, ref[key]), axis=-1).max())
     assert worst < TOL_M, f"{name}: BODex fingertips {worst * 1000:.3f} mm from the originals"
+
+
+@pytest.fixture(scope="module")
+def e3m5_job(tmp_path_factory, mesh_source, cache_dir):  # noqa: F811 - fixtures from tests.workers
+    if "shadow_e3m5" not in HANDS:
+        pytest.skip("shadow_e3m5 needs make hands")
+    from tests.workers.conftest import tiny_config
+    from tests.workers.test_shard import run_all
+
+    cfg = tiny_config(mesh_source, hand="shadow_e3m5", count=1, grasps_per_object=2)
+    return run_all(tmp_path_factory.mktemp("e3m5job") / "job", cfg, cache_dir).path
+
+
+def test_export_of_a_job_directory(e3m5_job, hands, tmp_path):
+    """`datagen export JOB`: the job's rows (object_path relative to the job) come out as files
+    whose peer hand puts the fingertips on ours, and whose objects are the job's pieces."""
+    from datagen.io import read_job
+
+    out = tmp_path / "dgb"
+    assert main(["export", str(e3m5_job), "--format", "dexgraspbench", "--out", str(out)]) == 0
+    rows = {r["grasp_id"]: r for r in read_job(e3m5_job).to_pylist()}
+    files = sorted((out / "graspdata").rglob("*.npy"))
+    assert len(files) == len(rows) > 0
+    hand, model = hands["shadow_e3m5"], peer_model("shadow_e3m5")
+    for f in files:
+        d = np.load(f, allow_pickle=True).item()
+        row = rows[d["grasp_id"]]
+        assert f.parent.name == f"scale{round(row['object_scale_m'] * 100):03d}_pose000"
+        pieces = sorted((Path(d["obj_path"]) / "urdf" / "meshes").glob("*.obj"))
+        ours = (e3m5_job / row["object_path"] / layout.PIECES_DIR).glob("coacd_convex_piece_*")
+        assert len(pieces) == len(list(ours))
+        for k in POSES:
+            err = np.linalg.norm(_peer_tips(model, hand, d[k]) - _our_tips(hand, row[k]), axis=-1).max()
+            assert err < TOL_M
