@@ -17,13 +17,14 @@ def register_run(sub: argparse._SubParsersAction) -> None:
                    help="number of objects (JobConfig.count; default 6). Not an object size: object sizes "
                         "are JobConfig.scales, metres")
     p.add_argument("--scale", type=_renamed_scale, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--source", default=None, help="object source URI (procedural, dir:PATH, ...)")
-    p.add_argument("--manifest", default=None, help="existing manifest; its first SCALE objects are used")
+    p.add_argument("--source", default=None, help="object source URI: procedural, tasks, dir:PATH, dexgraspnet:PATH, pybullet "
+                   "(default: procedural)")
+    p.add_argument("--manifest", default=None, help="existing manifest; its first --objects objects are used")
     p.add_argument("--hand", default=None, help="built-in hand name (`datagen hands`) or hand spec YAML "
                    "(default: shadow)")
     p.add_argument("--tasks", default=None, help="comma-separated task names (`datagen tasks`) or YAML paths "
                    "(default: force_closure)")
-    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale")
+    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: 8)")
     p.add_argument("--objects-per-shard", type=int, default=None, help="objects per shard task (default: 2)")
     p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
