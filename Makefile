@@ -65,10 +65,11 @@ bench-hands: $(STAMP)
 	$(PY) -m benchmarks.bench_hands
 
 # Regenerate the built-in hand specs (datagen/hands/specs/*.yaml) and their review pictures
-# (out/hands/*.png); needs `make hands` and an offscreen GL (apt-get install -y libosmesa6).
-hand-specs: $(STAMP)
+# (out/hands/*.png); needs `make hands` and an offscreen GL: `python -m datagen.gl` picks MUJOCO_GL
+# (kept if set, else egl, then osmesa) and says what is missing when none works.
+hand-specs: $(STAMP) hands
 	mkdir -p out/hands
-	MUJOCO_GL=osmesa $(PY) -m datagen.hands.make_spec --builtin all --render-dir out/hands
+	gl=$$($(PY) -m datagen.gl) && MUJOCO_GL=$$gl $(PY) -m datagen.hands.make_spec --builtin all --render-dir out/hands
 
 # MuJoCo evaluation (issue 6): seconds per grasp, serial against parallel directions.
 # BENCH_EVAL_ARGS="--grasps GRASPS.parquet" also times the rows of a (synthesized) grasp table.
@@ -88,7 +89,7 @@ SOURCE ?= procedural
 DATASET_ARGS ?=
 
 dataset: $(STAMP)
-	$(PY) -m datagen.cli run --out $(OUT) --scale $(SCALE) --hand $(HAND) --tasks $(TASKS) \
+	$(PY) -m datagen.cli run --out $(OUT) --objects $(SCALE) --hand $(HAND) --tasks $(TASKS) \
 		--source $(SOURCE) $(DATASET_ARGS)
 
 bench-pipeline: $(STAMP)

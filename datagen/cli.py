@@ -2,8 +2,9 @@
 
 To add a subcommand, write ``register(sub)`` in your package (it calls ``sub.add_parser`` and
 sets ``func`` to a handler taking the parsed args and returning an exit code) and add one
-line to ``REGISTRARS``. Registrars are imported lazily, so one package's heavy imports never
-slow another's subcommand.
+line to ``REGISTRARS``. Only the registrar of the command being run is imported (all of them for
+``datagen --help``), so one package's heavy imports never slow another's subcommand. Every
+option has a help text; the help shows its default (`HelpFormatter`).
 """
 
 from __future__ import annotations
@@ -12,12 +13,14 @@ import argparse
 import importlib
 import sys
 
-from datagen.objects.errors import ObjectError
+import datagen
 
-__all__ = ["REGISTRARS", "build_parser", "main"]
+__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "main"]
 
-# subcommand name -> "module:function" registering it (synth, eval, run, status, report later)
+# subcommand name -> "module:function" registering it
 REGISTRARS: dict[str, str] = {
+    "hands": "datagen.listing:register_hands",
+    "tasks": "datagen.listing:register_tasks",
     "manifest": "datagen.objects.commands:register_manifest",
     "prepare": "datagen.objects.commands:register_prepare",
     "synth": "datagen.synth.commands:register_synth",
@@ -26,23 +29,74 @@ REGISTRARS: dict[str, str] = {
     "run": "workers.cli:register_run",
     "status": "workers.cli:register_status",
     "report": "workers.cli:register_report",
+    "export": "datagen.interop.commands:register_export",
+    "import": "datagen.interop.commands:register_import",
 }
+# domain errors printed as one line with exit status 2 (module:class, looked up only if imported)
+_ERRORS = ("datagen.objects.errors:ObjectError", "workers.job:JobError", "datagen.gl:GLUnavailable")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="datagen", description="dexterous grasp dataset factory")
-    sub = parser.add_subparsers(dest="command", required=True)
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends ``(default: X)`` to an option's help unless the default is None/False (the help then
+    says what happens) or the help already names it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default in (None, False, argparse.SUPPRESS) or "default" in text:
+            return text
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose sub-parsers inherit `HelpFormatter`."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
+def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser with the subcommands ``commands`` registered (default: all)."""
+    parser = Parser(prog="datagen", description="dexterous grasp dataset factory: synthesize hand poses, "
+                    "check them in MuJoCo, write Parquet datasets. `datagen COMMAND -h` for a command's options.")
+    parser.add_argument("--version", action="version", version=f"datagen {datagen.__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
     for name, target in REGISTRARS.items():
-        module, _, func = target.partition(":")
-        getattr(importlib.import_module(module), func)(sub)
+        if commands is None or name in commands:
+            module, _, func = target.partition(":")
+            getattr(importlib.import_module(module), func)(sub)
     return parser
 
 
+def _command(argv: list[str]) -> list[str] | None:
+    """The subcommand named in ``argv`` (to register only it), [] for a bare ``--version``, None
+    (register all) otherwise."""
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if first in REGISTRARS:
+        return [first]
+    if first is None and "--version" in argv and not {"-h", "--help"} & set(argv):
+        return []
+    return None
+
+
+def _domain_errors() -> tuple[type[BaseException], ...]:
+    out: list[type[BaseException]] = [ValueError, FileNotFoundError]
+    for target in _ERRORS:
+        module, _, name = target.partition(":")
+        if module in sys.modules:  # a module never imported cannot have raised its error
+            out.append(getattr(sys.modules[module], name))
+    return tuple(out)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    from datagen.gl import drop_unusable
+
+    drop_unusable()  # a MUJOCO_GL that would make `import mujoco` fail is dropped, with a warning
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(_command(argv)).parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ObjectError, ValueError, FileNotFoundError) as exc:
+    except _domain_errors() as exc:
         print(f"datagen {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

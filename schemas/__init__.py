@@ -2,7 +2,7 @@
 
 ``grasps.json`` (synthesized rows), ``evaluated.json`` (a dataset shard: grasps + the MuJoCo
 evaluation columns, via ``extends``) and ``failures.json`` (a job's failed objects) declare
-every column (type, shape, unit, frame, doc); :func:`arrow_schema`
+every column (type, shape, unit, frame, doc; names end with their unit, `UNIT_SUFFIXES`); :func:`arrow_schema`
 builds the ``pyarrow.Schema`` from it (``nq`` = 7 + the hand's joint count), with the schema
 name and version in the metadata; :func:`check_version` refuses files of another version.
 """
@@ -15,7 +15,11 @@ from pathlib import Path
 
 import pyarrow as pa
 
-__all__ = ["SchemaError", "arrow_schema", "check_version", "columns", "declaration"]
+__all__ = ["UNIT_SUFFIXES", "SchemaError", "arrow_schema", "check_version", "column_table", "columns", "declaration"]
+
+# a column whose values have one unit ends its name with that unit's suffix
+UNIT_SUFFIXES = {"m": "_m", "m^2": "_m2", "rad": "_rad", "deg": "_deg", "N": "_n", "N m": "_nm", "s": "_s",
+                 "kg": "_kg"}
 
 _DIR = Path(__file__).parent
 _SCALARS = {"string": pa.string(), "float32": pa.float32(), "int64": pa.int64(), "int32": pa.int32(), "bool": pa.bool_()}
@@ -75,3 +79,14 @@ def check_version(schema: pa.Schema, name: str = "grasps", where: str = "table")
     if meta.get("datagen.schema") != name or meta.get("datagen.schema_version") != want:
         raise SchemaError(f"{where}: schema {meta.get('datagen.schema')!r} version "
                           f"{meta.get('datagen.schema_version')!r}, expected {name!r} version {want}")
+
+
+def column_table(name: str = "evaluated") -> list[dict[str, str]]:
+    """One dict per column of ``name`` (name, type, unit, frame, meaning) for documentation; a
+    fixed-size list shows its size (``float32[nq]``)."""
+    out = []
+    for c in columns(name):
+        t = c["type"] + (f"[{c['shape'][0]}]" if "shape" in c else "")
+        out.append({"name": c["name"], "type": t, "unit": c.get("unit", ""), "frame": c.get("frame", ""),
+                    "meaning": c["doc"]})
+    return out

@@ -13,19 +13,30 @@ def register_run(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run or resume a dataset job (Ray)")
     p.add_argument("--out", default="jobs/default", help="job directory (created; resumed if it exists)")
     p.add_argument("--config", default=None, help="YAML of JobConfig fields (flags below override it)")
-    p.add_argument("--scale", type=int, default=None, help="number of objects (JobConfig.count)")
-    p.add_argument("--source", default=None, help="object source URI (procedural, dir:PATH, ...)")
-    p.add_argument("--manifest", default=None, help="existing manifest; its first SCALE objects are used")
-    p.add_argument("--hand", default=None)
-    p.add_argument("--tasks", default=None, help="comma-separated task names or YAML paths")
-    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale")
-    p.add_argument("--objects-per-shard", type=int, default=None)
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--objects", type=int, default=None, dest="count",
+                   help="number of objects (JobConfig.count; default 6). Not an object size: object sizes "
+                        "are JobConfig.scales, metres")
+    p.add_argument("--scale", type=_renamed_scale, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--source", default=None, help="object source URI: procedural, tasks, dir:PATH, dexgraspnet:PATH, pybullet "
+                   "(default: procedural)")
+    p.add_argument("--manifest", default=None, help="existing manifest; its first --objects objects are used")
+    p.add_argument("--hand", default=None, help="built-in hand name (`datagen hands`) or hand spec YAML "
+                   "(default: shadow)")
+    p.add_argument("--tasks", default=None, help="comma-separated task names (`datagen tasks`) or YAML paths "
+                   "(default: force_closure)")
+    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: 8)")
+    p.add_argument("--objects-per-shard", type=int, default=None, help="objects per shard task (default: 2)")
+    p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
     p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
+
+
+def _renamed_scale(value: str):
+    raise argparse.ArgumentTypeError(f"`datagen run --scale` was renamed `--objects` (a number of objects: "
+                                     f"--objects {value}); object sizes in metres are JobConfig.scales")
 
 
 def _config(args):
@@ -35,7 +46,7 @@ def _config(args):
 
     data = yaml.safe_load(open(args.config)) if args.config else {}
     data = dict(data or {})
-    for key, val in (("count", args.scale), ("source", args.source), ("manifest", args.manifest),
+    for key, val in (("count", args.count), ("source", args.source), ("manifest", args.manifest),
                      ("hand", args.hand), ("grasps_per_object", args.grasps),
                      ("objects_per_shard", args.objects_per_shard), ("seed", args.seed)):
         if val is not None:
@@ -83,7 +94,8 @@ def _status(args) -> int:
 def register_report(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="write a dataset card (JOB_DIR/README.md) with rendered grasps")
     p.add_argument("job", help="job directory")
-    p.add_argument("--renders", type=int, default=3, help="grasps to render (0: none)")
+    p.add_argument("--renders", type=int, default=6,
+                   help="grasps to draw, successes and failures alternately, across objects (0: none)")
     p.set_defaults(func=_report)
 
 

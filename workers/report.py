@@ -1,7 +1,10 @@
 """``datagen report JOB_DIR``: a dataset card (JOB_DIR/README.md) with tables and rendered grasps.
 
-Rendering uses MuJoCo's offscreen GL (``MUJOCO_GL``, default ``osmesa`` on a machine without a
-display); when no context can be opened the card says so instead of showing pictures.
+The card opens with Hugging Face front matter (``configs: data_files`` naming the shards), then
+outcomes, a column table generated from ``schemas/evaluated.json`` (name, unit, frame, meaning),
+reader snippets, and captioned pictures of successes and failures across several objects.
+Rendering uses MuJoCo's offscreen GL, chosen by `datagen.gl.select_backend` (``MUJOCO_GL`` if set,
+else egl, then osmesa); when no backend works the card says so instead of showing pictures.
 """
 
 from __future__ import annotations
@@ -15,15 +18,48 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from schemas import column_table
+
 from .job import JobDir
 from .status import job_status
 
-__all__ = ["write_report"]
+__all__ = ["pick_renders", "write_report"]
+
+_FRONT_MATTER = """---
+pretty_name: {name}
+task_categories:
+- robotics
+tags:
+- dexterous-grasping
+- robotics
+- mujoco
+configs:
+- config_name: default
+  data_files:
+  - split: train
+    path: shards/part-*.parquet
+---
+"""
+_READERS = """```python
+import pandas as pd                                   # any Parquet reader works, no project code needed
+df = pd.read_parquet("shards")                        # one row per grasp; df[df.success] for verified ones
+joints = df.joint_names[0]                            # names of grasp_qpos[7:]
+
+import duckdb                                         # per-object success rates in SQL
+duckdb.sql("select object_id, avg(success::int) from 'shards/*.parquet' group by 1").show()
+
+from datasets import load_dataset                     # Hugging Face (the front matter names the files)
+ds = load_dataset("parquet", data_files="shards/part-*.parquet", split="train")
+
+from datagen.io import GraspDataset, read_job         # with the project: schema check, torch Dataset
+table = read_job(".", only_success=True)
+```
+"""
 
 
 def _table(header: list[str], rows: list[list]) -> list[str]:
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    out += ["| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |" for r in rows]
     return out + [""]
 
 
@@ -34,19 +70,50 @@ def _read_rows(job: JobDir) -> pa.Table | None:
     return pa.concat_tables(tables) if tables else None
 
 
-def _render(job: JobDir, rows: pa.Table, n: int) -> tuple[list[str], str]:
-    """(relative PNG paths, note). Renders the first ``n`` successful grasps (else any) in a fresh
-    process: MuJoCo reads MUJOCO_GL when first imported, and this one may have imported it."""
+def pick_renders(success: list[bool], objects: list[str], n: int) -> list[int]:
+    """Up to ``n`` row indices to draw: successes and failures alternately (starting with a
+    success), each from an object not drawn yet while one is left; deterministic."""
+    pools = {True: [i for i, s in enumerate(success) if s], False: [i for i, s in enumerate(success) if not s]}
+    picked: list[int] = []
+    seen: set[str] = set()
+    want = True
+    while len(picked) < n and (pools[True] or pools[False]):
+        pool = pools[want] or pools[not want]
+        j = next((k for k, i in enumerate(pool) if objects[i] not in seen), 0)
+        i = pool.pop(j)
+        picked.append(i)
+        seen.add(objects[i])
+        want = not want
+    return picked
+
+
+def _caption(row: dict) -> str:
+    verdict = "success" if row["success"] else f"failure ({row['reason']})"
+    pen = row.get("penetration_m")
+    pen = "" if pen is None or pen != pen else f", penetration {pen * 1000:.1f} mm"
+    return (f"**{verdict}**: object `{row['object_id']}` ({row.get('split') or 'no split'}) at scale "
+            f"{row['object_scale_m']:.3f} m, task `{row['task']}`, hand `{row['hand']}`{pen}, "
+            f"epsilon {row['epsilon']:.3f}; grasp `{row['grasp_id']}`")
+
+
+def _render(job: JobDir, rows: pa.Table | None, n: int) -> tuple[list[tuple[str, str]], str]:
+    """([(relative PNG path, caption)], note). Renders `pick_renders` rows in a fresh process:
+    MuJoCo reads MUJOCO_GL when first imported, and this one may have imported it."""
     if n <= 0 or rows is None:
         return [], "Rendering was skipped (--renders 0)."
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    os.environ.setdefault("MUJOCO_GL", "osmesa")
-    ok = [i for i, s in enumerate(rows["success"].to_pylist()) if s] or list(range(rows.num_rows))
-    picked = rows.take(ok[:n]).to_pylist()
+    from datagen.gl import GLUnavailable, select_backend
+
+    try:
+        select_backend()  # sets MUJOCO_GL, inherited by the rendering process
+    except GLUnavailable as exc:
+        return [], f"No grasp pictures: {exc}. Rerun `datagen report` once a backend works."
+    picked = rows.take(pick_renders(rows["success"].to_pylist(), rows["object_id"].to_pylist(), n)).to_pylist()
     with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
-        return pool.submit(_render_rows, str(job.path), picked).result()
+        paths, note = pool.submit(_render_rows, str(job.path), picked).result()
+    return [(p, _caption(r)) for p, r in zip(paths, picked)], note
 
 
 def _render_rows(path: str, picked: list[dict]) -> tuple[list[str], str]:
@@ -69,23 +136,43 @@ def _render_rows(path: str, picked: list[dict]) -> tuple[list[str], str]:
     except Exception as exc:  # noqa: BLE001 - no GL is a note in the card, not an error
         return [], (f"No grasp pictures: no offscreen GL context could be opened "
                     f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {type(exc).__name__}: {exc}. "
-                    "Install libosmesa6 and PyOpenGL (or use MUJOCO_GL=egl on a GPU) and rerun `datagen report`.")
+                    "`python -m datagen.gl` names a backend that works; rerun `datagen report`.")
 
 
-def write_report(path: str | Path, renders: int = 3) -> Path:
+def _columns_section(rows: pa.Table | None) -> list[str]:
+    md = ["## Columns", "",
+          "One row per grasp. Poses are in the object's frame (origin at the centre of its bounding box) at "
+          "the row's `object_scale_m`. A `*_qpos` column holds [x, y, z (m), qw, qx, qy, qz (root "
+          "quaternion), then one value per joint named in `joint_names` (rad)]. Names end with their unit "
+          "(`_m`, `_m2`, `_rad`, `_deg`); `success` is the MuJoCo verdict, `synth_usable` only the synthesis-side "
+          "pre-check. Declared in `schemas/evaluated.json`.", ""]
+    md += _table(["column", "type", "unit", "frame", "meaning"],
+                 [[f"`{c['name']}`", f"`{c['type']}`", c["unit"], c["frame"], c["meaning"]]
+                  for c in column_table("evaluated")])
+    if rows is not None and "joint_names" in rows.column_names and rows.num_rows:
+        names = rows["joint_names"][0].as_py()
+        md += [f"Joints of `{rows['hand'][0].as_py()}` (qpos[7:] in this order): "
+               + ", ".join(f"`{n}`" for n in names), ""]
+    return md
+
+
+def write_report(path: str | Path, renders: int = 6) -> Path:
+    """Write JOB/README.md; ``renders`` grasps are drawn (half successes, half failures)."""
     job = JobDir(path)
     doc = job.read_job()
     s = job_status(job.path)
     rows = _read_rows(job)
     fails = pq.read_table(job.failures_path) if job.failures_path.is_file() else None
     cfg = doc["config"]
-    md = [f"# Dataset card: {job.path.name}", "",
+    md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}")),
+          f"# Dataset card: {job.path.name}", "",
           f"Dexterous grasps of the **{cfg['hand']}** hand on {s['objects']} objects from `{cfg['source']}`, "
           f"tasks {', '.join(cfg['tasks'])}, synthesized by `datagen` and verified in MuJoCo.", "",
           f"- config hash `{doc['config_hash']}`, code `{doc['code_version']}`, created {doc['created_at']} "
           f"on `{doc['host']}`",
           f"- shards {s['shards_done']}/{s['shards_total']}{'' if s['complete'] else ' (incomplete)'}; "
-          f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`",
+          f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
+          f"`object_path` points into `objects/` (relative to this directory)",
           f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()), "",
           "## Outcome", ""]
     md += _table(["grasps", "successful", "success rate", "objects failed"],
@@ -93,39 +180,52 @@ def write_report(path: str | Path, renders: int = 3) -> Path:
     if rows is not None:
         md += ["### By task and scale", ""]
         groups: dict = {}
-        for t, sc, ok in zip(rows["task"].to_pylist(), rows["object_scale"].to_pylist(), rows["success"].to_pylist()):
+        for t, sc, ok in zip(rows["task"].to_pylist(), rows["object_scale_m"].to_pylist(), rows["success"].to_pylist()):
             g = groups.setdefault((t, round(sc, 4)), [0, 0])
             g[0] += 1
             g[1] += bool(ok)
-        md += _table(["task", "scale (m)", "grasps", "success rate"],
+        md += _table(["task", "object_scale_m", "grasps", "success rate"],
                      [[t, sc, n, f"{k / n:.1%}"] for (t, sc), (n, k) in sorted(groups.items())])
+        if "split" in rows.column_names:
+            splits, objs = rows["split"].to_pylist(), rows["object_id"].to_pylist()
+            md += ["### By split", ""]
+            md += _table(["split", "grasps", "objects"],
+                         [[sp, n, len({o for o, x in zip(objs, splits) if x == sp})]
+                          for sp, n in sorted(Counter(splits).items())])
         md += ["### Grasp outcomes (reason codes)", ""]
         md += _table(["reason", "grasps"], [[k, v] for k, v in s["eval_reasons"].items()])
         md += ["### Metrics (successful grasps)", ""]
         okr = rows.filter(pc.equal(rows["success"], True))
         mrows = []
-        for col, unit, mult in (("penetration_m", "mm", 1000), ("max_penetration", "mm", 1000), ("epsilon", "", 1),
-                                ("synth_epsilon", "", 1), ("touching_links", "", 1)):
-            if okr.num_rows:
+        for col, unit, mult in (("penetration_m", "mm", 1000), ("sphere_penetration_m", "mm", 1000),
+                                ("epsilon", "", 1), ("synth_epsilon", "", 1), ("touching_links", "", 1)):
+            if okr.num_rows and col in okr.column_names:
                 v = okr[col].cast(pa.float64())
-                mrows.append([col, unit, f"{pc.mean(v).as_py() * mult:.3g}", f"{pc.max(v).as_py() * mult:.3g}"])
-        md += _table(["column", "unit", "mean", "max"], mrows) if mrows else ["no successful grasps", ""]
+                mrows.append([f"`{col}`", unit or "as stored", f"{pc.mean(v).as_py() * mult:.3g}",
+                              f"{pc.max(v).as_py() * mult:.3g}"])
+        md += _table(["column", "shown in", "mean", "max"], mrows) if mrows else ["no successful grasps", ""]
     md += ["## Failures (objects without rows)", ""]
     if fails is not None and fails.num_rows:
         md += _table(["stage", "reason", "objects"],
                      [[k.split(':')[0], k.split(':', 1)[1], v] for k, v in Counter(
                          f"{a}:{b}" for a, b in zip(fails["stage"].to_pylist(), fails["reason"].to_pylist())).items()])
+        md += ["Stages: `process` (object processing: mesh checks, CoACD), `target` (the synthesis target: surface "
+               "samples and SDF grid), `synth` (optimization), `eval` (MuJoCo).", ""]
     else:
         md += ["none", ""]
     md += ["## Where the time went (worker seconds)", ""]
     md += _table(["stage", "seconds"], [[k[:-2], f"{v:.1f}"] for k, v in s["stage_seconds"].items()])
     md += ["shard_wall / shard_cpu: wall and CPU seconds of the shard tasks (CPU excludes isolated CoACD "
            "processes).", ""]
+    md += _columns_section(rows)
+    md += ["## Reading", "", _READERS]
     pics, note = _render(job, rows, renders)
     md += ["## Grasps", ""]
     if pics:
-        md += ["Columns: hand at the pregrasp, the grasp, after pregrasp -> grasp -> squeeze in MuJoCo; "
-               "rows: two views.", ""] + [f"![{p}]({p})" for p in pics] + [""]
+        md += ["Each picture: columns = hand at the pregrasp, the grasp, after pregrasp -> grasp -> squeeze in "
+               "MuJoCo; rows = two views (from beyond the object towards the palm, and 90 degrees around).", ""]
+        for i, (p, caption) in enumerate(pics, 1):
+            md += [f"![{p}]({p})", "", f"{i}. {caption}", ""]
     else:
         md += [note, ""]
     md += ["## Config", "", "```json", json.dumps(cfg, indent=1, sort_keys=True), "```", ""]

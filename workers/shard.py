@@ -120,7 +120,7 @@ def write_table_atomic(table: pa.Table, path: Path) -> None:
 
 def _failure(fails: list, shard: int, object_id: str, stage: str, reason: str, message: str,
              scale: float = float("nan"), task: str = "") -> None:
-    fails.append({"object_id": object_id, "object_scale": scale, "task": task, "stage": stage,
+    fails.append({"object_id": object_id, "object_scale_m": scale, "task": task, "stage": stage,
                   "reason": reason or "error", "message": message, "shard": shard})
 
 
@@ -212,7 +212,7 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         try:
             scfg_k = dataclasses.replace(scfg, seed=shard_seed(cfg, index))
             result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object)
-            table = result_table(result, targets, hand, task, scfg_k)
+            table = result_table(result, targets, hand, task, scfg_k, splits={e.id: e.split for e, _, _ in ready})
         except Exception as exc:  # noqa: BLE001
             for t in targets:
                 _failure(fails, index, t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "
@@ -224,7 +224,7 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         t0 = time.perf_counter()
         for t in targets:
             mask = pc.and_(pc.equal(table["object_id"], t.object_id),
-                                   pc.equal(table["object_scale"], pa.scalar(t.scale, pa.float32())))
+                                   pc.equal(table["object_scale_m"], pa.scalar(t.scale, pa.float32())))
             part = table.filter(mask)
             try:
                 tables.append(evaluate_table(part, ecfg, base=job.path, workers=1))

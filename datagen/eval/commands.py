@@ -1,4 +1,11 @@
-"""CLI subcommands of the evaluation: ``datagen eval`` and ``datagen render``."""
+"""CLI subcommands of the evaluation: ``datagen eval`` and ``datagen render``.
+
+Both take a grasp table: a Parquet file (``datagen synth`` output, a job's shard, an imported
+file) or a job directory (its finished shards). Relative ``object_path`` values are resolved
+against the job directory for a job's shards, else against the table's directory
+(`datagen.eval.table.table_base`). ``datagen render`` picks the offscreen GL backend
+(`datagen.gl.select_backend`) before mujoco is imported.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +15,8 @@ import time
 from pathlib import Path
 
 __all__ = ["register_eval", "register_render"]
+
+_TABLE_HELP = "grasp table: a Parquet file (synth output, a job's shard, an imported file) or a job directory"
 
 
 def _load_config(path: str | None, threads: int | None):
@@ -21,23 +30,24 @@ def _load_config(path: str | None, threads: int | None):
 
 def register_eval(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="simulate grasps in MuJoCo; add success, reason and metric columns")
-    p.add_argument("grasps", help="grasp table (Parquet), see datagen/eval/table.py for its columns")
-    p.add_argument("--out", required=True, help="evaluated table (Parquet)")
-    p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol)")
+    p.add_argument("grasps", help=_TABLE_HELP + " (columns: datagen/eval/table.py)")
+    p.add_argument("--out", required=True, help="evaluated table to write (Parquet)")
+    p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol's constants)")
     p.add_argument("--workers", type=int, default=1, help="processes evaluating rows in parallel")
-    p.add_argument("--threads", type=int, default=None, help="threads per grasp stepping the directions")
+    p.add_argument("--threads", type=int, default=None,
+                   help="threads per grasp stepping the six directions (default: EvalConfig.threads)")
     p.set_defaults(func=_eval)
 
 
 def _eval(args) -> int:
     import pyarrow.parquet as pq
 
-    from .table import evaluate_table, read_grasps
+    from .table import evaluate_table, read_grasps, table_base
 
     cfg = _load_config(args.config, args.threads)
     table = read_grasps(args.grasps)
     t0 = time.perf_counter()
-    out = evaluate_table(table, cfg, base=Path(args.grasps).resolve().parent, workers=args.workers)
+    out = evaluate_table(table, cfg, base=table_base(args.grasps), workers=args.workers)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(out, args.out)
     ok = sum(out.column("success").to_pylist())
@@ -48,25 +58,29 @@ def _eval(args) -> int:
 
 def register_render(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="PNG pictures of grasps (initial pose, grasp, after the squeeze)")
-    p.add_argument("grasps", help="grasp table (Parquet)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("grasps", help=_TABLE_HELP)
+    p.add_argument("--out", required=True, help="output directory (grasp_<row>_<object_id>.png)")
     p.add_argument("--rows", type=int, nargs="+", default=None, help="row indices (default: the first 4)")
-    p.add_argument("--config", default=None, help="EvalConfig YAML")
-    p.add_argument("--width", type=int, default=320)
-    p.add_argument("--height", type=int, default=240)
+    p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol's constants)")
+    p.add_argument("--width", type=int, default=320, help="width of one view, pixels")
+    p.add_argument("--height", type=int, default=240, help="height of one view, pixels")
     p.set_defaults(func=_render)
 
 
 def _render(args) -> int:
+    from datagen.gl import select_backend
+
+    select_backend()  # before mujoco is imported (raises GLUnavailable naming what is missing)
+
     from datagen.hands import load_hand
 
     from .render import render_grasp
     from .scene import build_scene
-    from .table import read_grasps, row_pieces, row_poses
+    from .table import read_grasps, row_pieces, row_poses, table_base
 
     cfg = _load_config(args.config, None)
     table = read_grasps(args.grasps)
-    base = Path(args.grasps).resolve().parent
+    base = table_base(args.grasps)
     indices = args.rows if args.rows is not None else list(range(min(4, table.num_rows)))
     hands = {}
     for i in indices:

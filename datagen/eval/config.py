@@ -3,7 +3,7 @@
 Defaults reproduce the public six-direction hold test (ARCHITECTURE.md, "The evaluation protocol"). Units: metres, seconds,
 newtons, kilograms; angles in degrees where the field name says ``_deg``. The simulated world
 is the object frame: the object starts at the origin with the identity pose, at scale
-``object_scale`` metres per normalized unit.
+``object_scale_m`` metres per normalized unit (the row column of that name).
 
 A task named in ``hold_tasks`` (default ``force_closure``) gets the six-direction test; any
 other task is looked up in ``tasks`` (a `TaskTest`: the task's disturbance ``-w_t``, applied

@@ -3,13 +3,15 @@
 Each picture is a grid: columns = the initial pose (hand at the pregrasp), the grasp pose, and
 the simulated state after pregrasp -> grasp -> squeeze; rows = two views of the object (from
 the side opposite the hand, looking at the palm, and from 90 degrees around).
-CPU: ``MUJOCO_GL=osmesa`` (``apt-get install -y libosmesa6`` and PyOpenGL); GPU:
-``MUJOCO_GL=egl``. The variable is read when mujoco is first imported, so set it in the
-environment. The renderer is closed explicitly (its destructor raises at interpreter exit).
+The offscreen GL backend is MuJoCo's ``MUJOCO_GL``, read when mujoco is first imported: call
+`datagen.gl.select_backend` before importing mujoco (``datagen render`` and ``datagen report`` do;
+it tries ``egl``, which Mesa provides on a CPU, then ``osmesa``), or set the variable yourself.
+The renderer is closed explicitly (its destructor raises at interpreter exit).
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import mujoco
@@ -48,8 +50,10 @@ def grasp_frames(scene: Scene, poses: np.ndarray, cfg: EvalConfig, *, width: int
     try:
         renderer = mujoco.Renderer(model, height=height, width=width)
     except Exception as exc:
-        raise EvalError("grasp rendering", f"cannot open an offscreen GL context: {exc}",
-                        "set MUJOCO_GL=osmesa (apt-get install -y libosmesa6) or MUJOCO_GL=egl") from None
+        gl = os.environ.get("MUJOCO_GL", "unset")
+        raise EvalError("grasp rendering", f"cannot open an offscreen GL context (MUJOCO_GL={gl} when mujoco "
+                        f"was imported): {exc}", "`python -m datagen.gl` names a backend that works here; set "
+                        "MUJOCO_GL to it before mujoco is imported") from None
     try:
         cams = _cameras(scene, poses)
         columns = []

@@ -3,18 +3,21 @@
 Input (Parquet, one row per grasp; other columns are kept as they are):
 
     object_id       string
-    object_scale    float   metres per normalized unit
+    object_scale_m  float   metres per normalized unit (``object_scale``, its name before schema 2, is
+                    accepted too)
     hand            string  built-in hand name or hand spec YAML path (`datagen.hands.load_hand`)
     task            string  ``force_closure`` (six directions) or a task of `EvalConfig.tasks`
     pregrasp_qpos, grasp_qpos, squeeze_qpos
                     list<float32> (7 + J): [x y z qw qx qy qz] + joints in the hand MJCF's joint
                     order, object frame (metres, radians)
     object_path     string  the processed object's cache entry directory (``ProcessedObject.entry``:
-                    meta.json, coacd/ pieces), absolute or relative to the table's directory
+                    meta.json, coacd/ pieces): absolute, or relative to the job directory for a
+                    job's shards and to the table's own directory otherwise (`table_base`)
     w_t             list<float32> (6), optional: the task wrench; used by task tests (see
                     `Evaluator.evaluate`), ignored by the six-direction test
 
-Output: the input columns plus `EVAL_COLUMNS` (below; units in the names). Row order is kept.
+Output: the input columns plus `EVAL_COLUMNS` (declared in schemas/evaluated.json; units in the
+names). Row order is kept.
 """
 
 from __future__ import annotations
@@ -27,44 +30,61 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from schemas import arrow_schema, declaration
+
 from .config import EvalConfig, EvalError
 from .evaluate import Evaluator, GraspResult
 from .scene import ObjectPieces, pieces_from_processed
 
 __all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "evaluate_table",
-           "read_grasps", "row_poses", "row_pieces"]
+           "read_grasps", "row_poses", "row_pieces", "table_base"]
 
-EVAL_SCHEMA_VERSION = 1
-INPUT_COLUMNS = ("object_id", "object_scale", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
+EVAL_SCHEMA_VERSION = int(declaration("evaluated")["version"])
+INPUT_COLUMNS = ("object_id", "object_scale_m", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
                  "object_path")
-_F32, _LF32 = pa.float32(), pa.list_(pa.float32())
-# name -> (Arrow type, description with units)
+# name -> (Arrow type, description): the `evaluated` schema's own columns (schemas/evaluated.json)
 EVAL_COLUMNS: dict[str, tuple[pa.DataType, str]] = {
-    "success": (pa.bool_(), "the grasp passed every test and filter"),
-    "reason": (pa.string(), "reason code: ok, invalid_grasp, penetration, no_contact, grasp_penetration, "
-                            "self_penetration, low_epsilon, unstable, slipped_<dir>, slipped_task"),
-    "eval_test": (pa.string(), "six_direction or the task name"),
-    "dir_success": (pa.list_(pa.bool_()), "per direction (+x -x +y -y +z -z, or the task): null = not run"),
-    "dir_translation_m": (_LF32, "largest object displacement seen per direction, m (NaN = not run)"),
-    "dir_rotation_deg": (_LF32, "largest object rotation seen per direction, degrees (NaN = not run)"),
-    "pregrasp_penetration_m": (_F32, "max hand-object depth at the pregrasp, m"),
-    "penetration_m": (_F32, "max hand-object depth at the grasp, m"),
-    "self_penetration_m": (_F32, "max hand self-penetration depth at the grasp, m"),
-    "min_distance_m": (_F32, "smallest signed hand-object distance at the grasp, m"),
-    "finger_distance_m": (_LF32, "signed fingertip-link distance to the object at the grasp, m, "
-                                 "hand.fingertip_names order"),
-    "touching_links": (pa.int32(), "hand links within touch_distance_m at the grasp"),
-    "num_contacts": (pa.int32(), "contacts (hand geoms within contact_distance_m) of the epsilon metric"),
-    "epsilon": (_F32, "epsilon metric of those contacts (0: not force closure)"),
-}
+    c["name"]: (arrow_schema("evaluated", nq=1).field(c["name"]).type,
+                c["doc"] + (f" ({c['unit']})" if c.get("unit") else ""))
+    for c in declaration("evaluated")["columns"]}
+# columns renamed in schema version 2, still accepted in input tables
+_RENAMED = {"object_scale": "object_scale_m"}
+
+
+def table_base(path: str | Path) -> Path:
+    """The directory relative ``object_path`` values of the table at ``path`` are resolved against:
+    the job directory when ``path`` is a job directory or lies inside one (a shard
+    ``JOB/shards/part-NNNNN.parquet``: rows name ``objects/<entry>`` relative to ``JOB``), else the
+    table's own directory."""
+    from datagen.io import layout
+
+    path = Path(path).resolve()
+    for d in ([path] if path.is_dir() else []) + list(path.parents):
+        if (d / layout.JOB_JSON).is_file():
+            return d
+    return path if path.is_dir() else path.parent
 
 
 def read_grasps(path: str | Path) -> pa.Table:
-    """Read a grasp table and check its columns (raises `EvalError` naming the missing ones)."""
+    """Read a grasp table (a Parquet file, or a job directory: its finished shards) and check its
+    columns (raises `EvalError` naming the missing ones). Resolve its rows' ``object_path`` against
+    `table_base` (path)."""
     path = Path(path)
-    if not path.is_file():
+    if path.is_dir():
+        from datagen.io import read_job
+
+        try:
+            table = read_job(path)
+        except FileNotFoundError as exc:
+            raise EvalError(str(path), f"not a grasp table: {exc}",
+                            "pass a Parquet grasp table or a job directory with finished shards") from None
+    elif path.is_file():
+        table = pq.read_table(path)
+        for old, new in _RENAMED.items():
+            if old in table.column_names and new not in table.column_names:
+                table = table.rename_columns([new if c == old else c for c in table.column_names])
+    else:
         raise EvalError(str(path), "grasp table not found")
-    table = pq.read_table(path)
     missing = [c for c in INPUT_COLUMNS if c not in table.column_names]
     if missing:
         raise EvalError(str(path), f"missing columns {missing}", f"a grasp table needs {list(INPUT_COLUMNS)}")
@@ -90,7 +110,7 @@ def row_pieces(row: dict, base: Path) -> ObjectPieces:
     except (OSError, ValueError, KeyError) as exc:
         raise EvalError(f"object {row['object_id']!r}", f"cannot read the processed object at {entry}: {exc}",
                         "object_path must be a processed object's cache entry (datagen prepare)") from None
-    return pieces_from_processed(processed, float(row["object_scale"]))
+    return pieces_from_processed(processed, float(row["object_scale_m"]))
 
 
 def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspResult]:

@@ -55,7 +55,8 @@ def read_job(job_dir: str | Path, columns: list[str] | None = None, only_success
 
 
 def joint_names(job_dir: str | Path) -> list[str]:
-    """Joint names of the qpos columns after the 7 root entries (from the file metadata)."""
+    """Joint names of the qpos columns after the 7 root entries (every row also carries them in
+    its ``joint_names`` column; this reads the file metadata, which older shards have too)."""
     paths = shard_paths(job_dir)
     if not paths:
         raise FileNotFoundError(f"{job_dir}: no grasp rows yet (no finished shard with rows)")

@@ -17,10 +17,10 @@ def register_manifest(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--count", type=int, default=None, help="number of objects (all files if omitted)")
     b.add_argument("--out", required=True, help="output manifest, e.g. manifests/NAME.jsonl")
     b.add_argument("--scales", type=float, nargs="+", default=None, help="object scales (metres)")
-    b.add_argument("--test-fraction", type=float, default=0.1)
+    b.add_argument("--test-fraction", type=float, default=0.1, help="share of objects in the test split")
     b.set_defaults(func=_manifest_build)
     c = msub.add_parser("check", help="validate a manifest")
-    c.add_argument("manifest")
+    c.add_argument("manifest", help="manifest file (JSONL)")
     c.set_defaults(func=_manifest_check)
 
 
@@ -44,10 +44,10 @@ def _manifest_check(args) -> int:
 
 def register_prepare(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prepare", help="process manifest objects into the cache")
-    p.add_argument("--manifest", required=True)
+    p.add_argument("--manifest", required=True, help="manifest file (JSONL) of the objects to process")
     p.add_argument("--config", default=None, help="YAML processing config (ProcessConfig fields)")
     p.add_argument("--cache", default=None, help="cache root (default $DATAGEN_CACHE or ~/.cache/datagen)")
-    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--workers", type=int, default=1, help="objects processed in parallel")
     p.add_argument("--limit", type=int, default=None, help="process only the first N objects")
     p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
     p.set_defaults(func=_prepare)

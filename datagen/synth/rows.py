@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import pyarrow as pa
@@ -24,8 +25,10 @@ def hand_asset_sha256(hand) -> str:
     return hashlib.sha256(Path(hand.mjcf_path).read_bytes()).hexdigest()
 
 
-def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float | None = None) -> pa.Table:
-    """One row per grasp of a :class:`~datagen.synth.SynthesisResult` (float32 poses)."""
+def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float | None = None,
+                 splits: Mapping[str, str] | None = None) -> pa.Table:
+    """One row per grasp of a :class:`~datagen.synth.SynthesisResult` (float32 poses). ``splits``
+    maps object ids to their manifest split (the ``split`` column; empty for objects it lacks)."""
     nq = 7 + hand.num_joints
     B = int(result.object_index.shape[0])
     oi = result.object_index.cpu().numpy()
@@ -54,11 +57,13 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
         "grasp_id": [grasp_id(targets[k].object_id, targets[k].scale, hand.name, task.name, result.seed, int(i))
                      for k, i in zip(oi, index)],
         "object_id": [targets[k].object_id for k in oi],
-        "object_scale": np.array([targets[k].scale for k in oi], dtype=np.float32),
+        "split": [(splits or {}).get(targets[k].object_id, "") for k in oi],
+        "object_scale_m": np.array([targets[k].scale for k in oi], dtype=np.float32),
         "object_path": [targets[k].object_path for k in oi],
         "mesh_sha256": [targets[k].mesh_sha256 for k in oi],
         "hand": [hand.name] * B,
         "hand_asset_sha256": [asset] * B,
+        "joint_names": [list(hand.joint_names)] * B,
         "task": [task.name] * B,
         "w_t": fixed(np.tile(np.asarray(task.w_t, dtype=np.float32) / np.linalg.norm(task.w_t), (B, 1)), 6),
         "gamma_deg": np.full(B, task.gamma_deg, dtype=np.float32),
@@ -67,15 +72,15 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
         "squeeze_qpos": fixed(result.squeeze, nq),
         "init_qpos": fixed(result.initial, nq),
         "contact_fingers": [list(result.fingers)] * B,
-        "contact_points": point_lists,
+        "contact_points_m": point_lists,
         "contact_normals": normal_lists,
-        "tip_distance": [list(r) for r in f32(result.tip_distance)],
-        "energy_total": e["total"], "energy_task": e["task"], "energy_distance": e["distance"],
-        "energy_penetration": e["penetration"], "energy_self_penetration": e["self_penetration"],
-        "energy_joint_limits": e["joint_limits"],
+        "tip_distance_m": [list(r) for r in f32(result.tip_distance)],
+        "energy_total": e["total"], "energy_task": e["task"], "energy_distance_m2": e["distance"],
+        "energy_penetration_m2": e["penetration"], "energy_self_penetration_m2": e["self_penetration"],
+        "energy_joint_limits_rad": e["joint_limits"],
         "synth_epsilon": f32(result.epsilon),
-        "max_penetration": f32(result.max_penetration),
-        "usable": result.usable(thr).cpu().numpy(),
+        "sphere_penetration_m": f32(result.max_penetration),
+        "synth_usable": result.usable(thr).cpu().numpy(),
         "seed": np.full(B, result.seed, dtype=np.int64),
         "grasp_index": index,
     }

@@ -40,7 +40,7 @@ def table_path(shadow, box_dir):
     entry = _processed_entry(pieces, box_dir)
     far = good.copy()
     far[:, 1] += 0.5
-    rows = {"object_id": ["box"] * 3, "object_scale": [pieces.scale] * 3, "hand": ["shadow"] * 3,
+    rows = {"object_id": ["box"] * 3, "object_scale_m": [pieces.scale] * 3, "hand": ["shadow"] * 3,
             "task": ["force_closure", "force_closure", "turn_knob"], "object_path": ["entry_box"] * 3,
             "keep_me": [7, 8, 9], "w_t": [[0, 0, 0, 0, 0, 1.0]] * 3}
     for k, name in enumerate(("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")):
@@ -77,17 +77,105 @@ def test_eval_cli_reports_missing_columns(tmp_path, capsys):
     assert "missing columns" in capsys.readouterr().err
 
 
-@pytest.mark.slow
-def test_render_cli_writes_png(table_path, tmp_path):
-    env = {**os.environ, "MUJOCO_GL": "osmesa"}
-    res = subprocess.run([sys.executable, "-m", "datagen.cli", "render", str(table_path), "--out", str(tmp_path),
-                          "--rows", "0", "--width", "160", "--height", "120"], env=env, capture_output=True,
-                         text=True, timeout=120)
-    if res.returncode != 0 and "GL context" in res.stderr:
-        pytest.skip(f"no offscreen GL here: {res.stderr.strip()[-200:]}")
-    assert res.returncode == 0, res.stderr
-    png = tmp_path / "grasp_000000_box.png"
-    data = png.read_bytes()
+def _datagen(args: list[str], **env) -> subprocess.CompletedProcess:
+    """``python -m datagen.cli ARGS`` in a fresh process, environment changes in ``env`` (None unsets)."""
+    e = {**os.environ, **{k: v for k, v in env.items() if v is not None}}
+    for k in [k for k, v in env.items() if v is None]:
+        e.pop(k, None)
+    return subprocess.run([sys.executable, "-m", "datagen.cli", *args], env=e, capture_output=True, text=True,
+                          timeout=300)
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    w, h = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
-    assert (w, h) == (3 * 160, 2 * 120)
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gl", [None, "osmesa"])
+def test_render_cli_writes_png(table_path, tmp_path, gl):
+    """Unset, the backend is chosen (egl, then osmesa); an unusable MUJOCO_GL (osmesa without
+    libOSMesa) is dropped with a warning. With no working backend at all the test skips."""
+    res = _datagen(["render", str(table_path), "--out", str(tmp_path), "--rows", "0", "--width", "160",
+                    "--height", "120"], MUJOCO_GL=gl)
+    if res.returncode != 0 and "no offscreen OpenGL backend works here" in res.stderr:
+        pytest.skip(f"no offscreen GL here: {res.stderr.strip()[-300:]}")
+    assert res.returncode == 0, res.stderr
+    assert _png_size(tmp_path / "grasp_000000_box.png") == (3 * 160, 2 * 120)
+
+
+def test_render_says_when_no_backend_works(table_path, tmp_path):
+    """PyOpenGL pinned to a platform neither egl nor osmesa accepts: both probes fail, the command
+    exits 2 naming each backend and the remedy, and writes nothing."""
+    res = _datagen(["render", str(table_path), "--out", str(tmp_path / "r"), "--rows", "0"],
+                   MUJOCO_GL=None, PYOPENGL_PLATFORM="glx")
+    assert res.returncode == 2, res.stderr
+    assert "no offscreen OpenGL backend works here" in res.stderr
+    assert "egl:" in res.stderr and "osmesa:" in res.stderr and "libosmesa6" in res.stderr
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("gl", ["osmesa", "no-such-backend"])
+def test_wrong_mujoco_gl_does_not_break_simulation(table_path, tmp_path, gl):
+    """`datagen eval` imports mujoco but does not render: a MUJOCO_GL that mujoco cannot load is
+    dropped with a warning (if the machine does have libOSMesa, osmesa is simply used)."""
+    out = tmp_path / "e.parquet"
+    res = _datagen(["eval", str(table_path), "--out", str(out)], MUJOCO_GL=gl)
+    assert res.returncode == 0, res.stderr
+    assert pq.read_table(out).column("success").to_pylist() == [True, False, True]
+    if gl != "osmesa":
+        assert f"MUJOCO_GL={gl!r} is not a backend mujoco knows" in res.stderr
+
+
+def _all_parsers():
+    import argparse
+
+    from datagen.cli import build_parser
+
+    todo, seen = [("datagen", build_parser())], []
+    while todo:
+        name, p = todo.pop()
+        seen.append((name, p))
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                todo += [(f"{name} {n}", sp) for n, sp in a.choices.items()]
+    return seen
+
+
+def test_every_option_has_help_and_shows_its_default():
+    import argparse
+
+    missing, hidden = [], []
+    for name, p in _all_parsers():
+        text = p.format_help()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction) or a.help == argparse.SUPPRESS:
+                continue
+            if a.help is None or not a.help.strip():
+                missing.append(f"{name} {'/'.join(a.option_strings) or a.dest}")
+            elif a.option_strings and a.default not in (None, False, "==SUPPRESS==") and "default" not in a.help:
+                if f"(default: {a.default})" not in " ".join(text.split()):
+                    hidden.append(f"{name} {a.option_strings[0]}")
+    assert not missing, f"options without help: {missing}"
+    assert not hidden, f"defaults not shown: {hidden}"
+
+
+def test_version_and_listings(capsys):
+    import datagen
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"datagen {datagen.__version__}"
+    from datagen.hands.load import BUILTIN_HANDS
+    from datagen.synth.config import builtin_tasks
+
+    assert main(["hands"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == list(BUILTIN_HANDS)
+    assert all(len(ln.split(None, 2)) == 3 for ln in lines)  # name, availability, description
+    assert main(["tasks"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == builtin_tasks()
+    knob = next(ln for ln in lines if ln.startswith("turn_knob2 "))
+    assert "object knob2" in knob and "Turn a round knob" in knob

@@ -35,6 +35,11 @@ def test_read_job_matches_the_files(job_dir, raw):
     names = joint_names(job_dir)
     assert len(names) + 7 == len(raw[0]["grasp_qpos"])
     assert names == json.loads(pq.read_schema(shard_paths(job_dir)[0]).metadata[b"datagen.joint_names"])
+    assert all(r["joint_names"] == names for r in raw)  # each row names its joints
+    manifest = [json.loads(ln) for ln in (job_dir / "manifest.jsonl").read_text().splitlines() if ln.strip()]
+    split = {e["id"]: e["split"] for e in manifest}
+    assert all(r["split"] == split[r["object_id"]] for r in raw)  # taken from the manifest
+    assert {r["split"] for r in raw} == {"train", "test"}
 
 
 def test_unfinished_shards_are_not_read(job_dir, tmp_path):

@@ -27,3 +27,16 @@ def test_every_column_is_documented_and_versioned(name):
     check_version(schema, name)
     with pytest.raises(SchemaError, match="expected"):
         check_version(schema, "grasps" if name != "grasps" else "failures")
+
+
+@pytest.mark.parametrize("name", ["grasps", "evaluated", "failures"])
+def test_names_carry_their_units(name):
+    """A column with one unit ends with its suffix; a suffix is never used for another unit."""
+    from schemas import UNIT_SUFFIXES
+
+    for c in columns(name):
+        unit = c.get("unit", "")
+        if unit in UNIT_SUFFIXES:
+            assert c["name"].endswith(UNIT_SUFFIXES[unit]), (c["name"], unit)
+        else:
+            assert not any(c["name"].endswith(s) for s in UNIT_SUFFIXES.values()), (c["name"], unit)
