@@ -26,6 +26,7 @@ REGISTRARS: dict[str, str] = {
     "run": "workers.cli:register_run",
     "status": "workers.cli:register_status",
     "report": "workers.cli:register_report",
+    "view": "datagen.view.commands:register_view",
 }
 
 
