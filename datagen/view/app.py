@@ -59,7 +59,8 @@ class Browser:
     # ------------------------------------------------------------------ GUI
     def _build_gui(self) -> None:
         gui, s = self.server.gui, self.source
-        gui.configure_theme(control_layout="fixed", control_width="large", show_logo=False)
+        gui.configure_theme(control_width="large", show_logo=False)
+        gui.main_panel.dock_right()
         gui.add_markdown(f"**datagen view**: `{s.where}`, {len(s)} grasps")
         with gui.add_folder("Filters"):
             self.f_verdict = gui.add_dropdown("verdict", (ANY, *[v for v in VERDICTS if v in s.verdicts()]))

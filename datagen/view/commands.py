@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import socket
 import sys
 import time
 
@@ -66,9 +67,9 @@ def _view(args) -> int:
         browser.select_row(args.row)
     print(f"datagen view: {len(source)} grasps at {browser.url} (Ctrl-C to stop)", flush=True)
     if args.host in ("127.0.0.1", "localhost"):
-        print(f"  from another machine: ssh -L {browser.server.get_port()}:localhost:{browser.server.get_port()} "
-              f"{{user}}@{{this host}}, then open http://localhost:{browser.server.get_port()}/",
-              file=sys.stderr, flush=True)
+        port = browser.server.get_port()
+        print(f"  from another machine: ssh -L {port}:localhost:{port} USER@{socket.gethostname()}, "
+              f"then open http://localhost:{port}/", file=sys.stderr, flush=True)
     try:
         while True:
             time.sleep(3600)

@@ -108,16 +108,23 @@ class GraspSource:
         return p if p.is_absolute() else self.base / p
 
     # ------------------------------------------------------------------ verdicts and filters
+    def _derived(self, key: str, make) -> list[str]:
+        if key not in self._cache:
+            self._cache[key] = make()
+        return self._cache[key]
+
     def verdicts(self) -> list[str]:
         """Per row: ``success``, ``failure`` or ``not evaluated`` (a table without eval columns)."""
-        return ["not evaluated" if v is None else ("success" if v else "failure") for v in self.values("success")]
+        return self._derived(" verdicts", lambda: ["not evaluated" if v is None else ("success" if v else "failure")
+                                                   for v in self.values("success")])
 
     def reasons(self) -> list[str]:
-        return ["" if r is None else str(r) for r in self.values("reason")]
+        """Per row the failure reason code (``ok`` for a success, empty where not evaluated)."""
+        return self._derived(" reasons", lambda: ["" if r is None else str(r) for r in self.values("reason")])
 
     def scales(self) -> list[str]:
         """Per row the object scale as a label (``0.060 m``), so equal float32 scales compare equal."""
-        return [f"{float(s):.3f} m" for s in self.values("object_scale")]
+        return self._derived(" scales", lambda: [f"{float(s):.3f} m" for s in self.values("object_scale")])
 
     def select(self, verdict: str | None = None, reason: str | None = None, task: str | None = None,
                hand: str | None = None, scale: str | None = None, object_id: str | None = None) -> np.ndarray:
