@@ -24,11 +24,12 @@ NORMAL_RGB = (250, 200, 0)
 
 
 def camera_for(posed: PosedGrasp) -> tuple[np.ndarray, np.ndarray]:
-    """(position, look_at) of a camera on the object, from 60 degrees around the hand's side
+    """(position, look_at) of a camera on the object: from the side (100 degrees around from the
+    hand's root, so the fingers and the object are seen side by side rather than the forearm)
     and 25 degrees above, at a distance that frames the fingers (metres)."""
     toward = posed.poses[1, :3].copy()
     toward[2] = 0.0
-    az = np.arctan2(toward[1], toward[0]) + np.radians(60.0) if np.linalg.norm(toward) > 1e-9 else 0.0
+    az = np.arctan2(toward[1], toward[0]) + np.radians(100.0) if np.linalg.norm(toward) > 1e-9 else 0.0
     dist = max(0.2, 4.0 * posed.scene.objects.scale)
     el = np.radians(25.0)
     pos = dist * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])

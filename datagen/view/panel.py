@@ -56,6 +56,8 @@ def format_value(value, unit: str) -> str:
         if unit == "deg":
             return f"{value:.1f} deg"
         return f"{value:.4g}" + (f" {unit}" if unit else "")
+    if isinstance(value, str) and len(value) > 20:
+        return value[:16] + "..."  # hashes: the start identifies them
     return f"{value}" + (f" {unit}" if unit and isinstance(value, int) else "")
 
 
