@@ -80,3 +80,28 @@ def test_simulated_state_holds_the_hand_at_the_squeeze_root(posed):
     assert np.isfinite(opos).all() and np.linalg.norm(opos) < 0.05  # the object stays in the hand's reach
     with pytest.raises(ValueError, match="unknown state"):
         posed_grasp.state("closed")
+
+
+@pytest.mark.parametrize("name", ["leap", "allegro", "shadow_e3m5"])
+def test_other_hands_follow_their_fk(name, source):
+    from datagen.hands import available_hands
+
+    if name not in available_hands():
+        pytest.skip(f"{name} needs `make hands`")
+    hand = load_hand(name, dtype=torch.float64)
+    g = torch.Generator().manual_seed(0)
+    joints = hand.apply_couplings(hand.random_joints((3,), generator=g))
+    root = torch.tensor([[0.02, -0.01, 0.12, 0.9, 0.1, -0.3, 0.2]], dtype=torch.float64).expand(3, 7)
+    poses = torch.cat([root, joints], dim=-1).numpy()
+    posed = SceneCache(source.eval_config).posed(name, source.object_dir(0), 0.06, "force_closure", poses)
+    m = posed.scene.model
+    for state in ("pregrasp", "grasp", "squeeze"):
+        row = torch.as_tensor(poses[STATES.index(state)])
+        T = hand.link_transforms(row[:7], row[7:]).numpy()
+        pos, quat, _, _ = posed.state(state)
+        hand_geoms = [(k, geom) for k, geom in enumerate(posed.geoms) if geom.part == "hand"]
+        assert len(hand_geoms) > 10
+        for k, geom in hand_geoms:
+            Tl = T[hand.link_names.index(m.body(m.geom_bodyid[geom.index]).name[len(HAND_PREFIX):])]
+            assert np.abs(pos[k] - (Tl[:3, 3] + Tl[:3, :3] @ m.geom_pos[geom.index])).max() < 1e-5
+            assert np.abs(_mat(quat[k]) - Tl[:3, :3] @ _mat(m.geom_quat[geom.index])).max() < 1e-5
