@@ -146,8 +146,7 @@ class Browser:
         with self._lock:
             if len(self.object_rows) == 0:
                 self.current = None
-                self.server.scene.remove_by_name("/grasp")
-                self.drawing._key = None
+                self.drawing.clear()
                 self.panel.content = "No grasp matches the filters."
                 self.g_where.content = ""
                 return

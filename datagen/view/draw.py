@@ -92,6 +92,11 @@ class GraspDrawing:
             self.scene.add_arrows("/grasp/contacts/normals", segs, NORMAL_RGB, shaft_radius=0.0012,
                                   head_radius=0.003, head_length=0.006)
 
+    def clear(self) -> None:
+        """Remove every node of the drawn row."""
+        self.scene.remove_by_name("/grasp")
+        self.nodes, self.roles, self.contacts, self._key = [], [], None, None
+
     def set_visible(self, role: str, on: bool) -> None:
         """Show or hide one role: ``object``, ``hand``, ``collision`` or ``contacts``."""
         self.visible[role] = on

@@ -2,8 +2,10 @@
 
 Only the distribution's ``chromium`` package and the ``websockets`` client (a viser dependency)
 are used: no browser download, no driver. The browser runs with a fresh profile, loopback
-debugging only, and no background networking; every request the page makes is recorded in
-``requests`` so a test can check that nothing leaves the machine.
+debugging only, no background networking, and no name resolution except for 127.0.0.1 (a page
+that needs a CDN fails to draw); every request of the page itself is recorded in ``requests``
+so a test can check that nothing leaves the machine (a worker's requests are not recorded, but
+are blocked all the same).
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ CHROMIUM = Path("/usr/bin/chromium")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--remote-debugging-address=127.0.0.1",
-         "--remote-debugging-port=0"]
+         "--remote-debugging-port=0",
+         # offline: every host name but loopback fails to resolve, so a page that draws needed no network
+         "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1"]
 
 
 class Chromium:
