@@ -44,7 +44,7 @@ class Browser:
         self.rows = np.arange(len(source))    # rows passing the filters
         self.object_rows = self.rows          # rows of the picked object among them
         self.current: int | None = None       # the row shown
-        self._object_key = None
+        self._framed = None                   # (object, scale) the camera was last placed for
         self._build_gui()
         self._apply_filters()
 
@@ -166,8 +166,8 @@ class Browser:
                 return
             self.current = i
             self.panel.content = row_markdown(s, i)
-            if key[1:3] != (self._object_key or (None, None, None))[1:3]:
-                self._object_key = key
+            if key[1:3] != self._framed:  # a new object or scale: frame it
+                self._framed = key[1:3]
                 pos, look = camera_for(posed)
                 self.server.initial_camera.position = tuple(pos)
                 self.server.initial_camera.look_at = tuple(look)
