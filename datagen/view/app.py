@@ -25,8 +25,8 @@ __all__ = ["Browser", "ANY"]
 ANY = "(any)"
 
 
-def _options(values) -> tuple[str, ...]:
-    return (ANY, *sorted({str(v) for v in values if v is not None and str(v) != ""}))
+def _options(labels: list[str]) -> tuple[str, ...]:
+    return (ANY, *sorted(labels))
 
 
 class Browser:
@@ -63,11 +63,11 @@ class Browser:
         gui.main_panel.dock_right()
         gui.add_markdown(f"**datagen view**: `{s.where}`, {len(s)} grasps")
         with gui.add_folder("Filters"):
-            self.f_verdict = gui.add_dropdown("verdict", (ANY, *[v for v in VERDICTS if v in s.verdicts()]))
-            self.f_reason = gui.add_dropdown("failure reason", _options(s.reasons()))
-            self.f_task = gui.add_dropdown("task", _options(s.values("task")))
-            self.f_hand = gui.add_dropdown("hand", _options(s.values("hand")))
-            self.f_scale = gui.add_dropdown("scale", _options(s.scales()))
+            self.f_verdict = gui.add_dropdown("verdict", (ANY, *[v for v in VERDICTS if v in s.options("verdict")]))
+            self.f_reason = gui.add_dropdown("failure reason", _options(s.options("reason")))
+            self.f_task = gui.add_dropdown("task", _options(s.options("task")))
+            self.f_hand = gui.add_dropdown("hand", _options(s.options("hand")))
+            self.f_scale = gui.add_dropdown("scale", (ANY, *sorted(s.options("scale"))))
             self.matches = gui.add_markdown("")
         with gui.add_folder("Grasp"):
             self.g_object = gui.add_dropdown("object", (ANY,))
@@ -104,8 +104,7 @@ class Browser:
             self.rows = self.source.select(verdict=self._value(self.f_verdict), reason=self._value(self.f_reason),
                                            task=self._value(self.f_task), hand=self._value(self.f_hand),
                                            scale=self._value(self.f_scale))
-            ids = self.source.values("object_id")
-            objects = list(dict.fromkeys(str(ids[i]) for i in self.rows))
+            objects = self.source.options("object_id", self.rows)
             self.matches.content = f"{len(self.rows)} grasps of {len(objects)} objects match"
             keep = self.g_object.value if self.g_object.value in objects else (objects[0] if objects else ANY)
             self.g_object.options = tuple(objects) if objects else (ANY,)
@@ -114,9 +113,9 @@ class Browser:
 
     def _pick_object(self) -> None:
         with self._lock:
-            ids = self.source.values("object_id")
-            obj = self.g_object.value
-            self.object_rows = np.array([i for i in self.rows if str(ids[i]) == obj], dtype=np.int64)
+            codes, labels = self.source.categories("object_id")
+            want = labels.index(self.g_object.value) if self.g_object.value in labels else -2
+            self.object_rows = self.rows[codes[self.rows] == want]
             n = max(1, len(self.object_rows))
             self.g_index.max = n
             if self.g_index.value != 1:
@@ -137,7 +136,7 @@ class Browser:
                 for f in (self.f_verdict, self.f_reason, self.f_task, self.f_hand, self.f_scale):
                     f.value = ANY
                 self._apply_filters()
-            self.g_object.value = str(self.source.values("object_id")[i])
+            self.g_object.value = self.source.value("object_id", i)
             self._pick_object()
             self.g_index.value = int(np.flatnonzero(self.object_rows == i)[0]) + 1
 
@@ -156,11 +155,10 @@ class Browser:
             state = STATES[int(self.g_state.value)]
             self.g_where.content = f"grasp {k + 1} / {len(self.object_rows)} of this object, pose **{state}**"
             try:
-                hand, task = str(s.values("hand")[i]), str(s.values("task")[i] or "")
-                scale = float(s.values("object_scale")[i])
+                hand, task, scale = s.value("hand", i), s.value("task", i) or "", s.scale(i)
                 posed = self.cache.posed(hand, s.object_dir(i), scale, task, s.poses(i))
                 key = (hand, str(s.object_dir(i)), scale, task)
-                self.drawing.show(posed, s.values("contact_points")[i], s.values("contact_normals")[i], state, key)
+                self.drawing.show(posed, s.value("contact_points", i), s.value("contact_normals", i), state, key)
             except (ValueError, OSError) as exc:
                 self.panel.content = f"**cannot show row {i}**: {exc}"
                 return

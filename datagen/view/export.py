@@ -22,7 +22,7 @@ __all__ = ["export_html"]
 
 
 def _page_name(source: GraspSource, i: int) -> str:
-    gid = source.values("grasp_id")[i]
+    gid = source.value("grasp_id", i)
     return f"grasp-{i:05d}" + (f"-{str(gid)[:12]}" if gid else "") + ".html"
 
 
@@ -40,12 +40,11 @@ def export_html(source: GraspSource, rows: list[int], out_dir: str | Path, *,
         for i in rows:
             server.scene.set_up_direction("+z")
             drawing = GraspDrawing(server.scene)
-            hand, task = str(source.values("hand")[i]), str(source.values("task")[i] or "")
-            scale = float(source.values("object_scale")[i])
+            hand, task, scale = source.value("hand", i), source.value("task", i) or "", source.scale(i)
             posed = cache.posed(hand, source.object_dir(i), scale, task, source.poses(i))
             key = (hand, str(source.object_dir(i)), scale, task)
-            points, normals = source.values("contact_points")[i], source.values("contact_normals")[i]
-            head = f"{source.values('object_id')[i]} at {scale:.3f} m, {hand}, {task}: {verdict_line(source, i)}"
+            points, normals = source.value("contact_points", i), source.value("contact_normals", i)
+            head = f"{source.value('object_id', i)} at {scale:.3f} m, {hand}, {task}: {verdict_line(source, i)}"
 
             def draw(state: str) -> None:
                 drawing.show(posed, points, normals, state, key)
@@ -71,8 +70,8 @@ def export_html(source: GraspSource, rows: list[int], out_dir: str | Path, *,
 
 
 def _write_index(source: GraspSource, rows: list[int], pages: list[Path], path: Path) -> None:
-    t = source.table
-    metric_cols = [(find_column(t.column_names, stem), label) for stem, label in METRICS]
+    schema = source.schema
+    metric_cols = [(find_column(schema.names, stem), label) for stem, label in METRICS]
     metric_cols = [(c, label) for c, label in metric_cols if c is not None]
     head = ["page", "object", "scale", "hand", "task", "verdict"] + [label for _, label in metric_cols]
     lines = ["<!doctype html>", "<meta charset='utf-8'>", f"<title>datagen grasps: {html.escape(source.where)}</title>",
@@ -84,9 +83,9 @@ def _write_index(source: GraspSource, rows: list[int], pages: list[Path], path: 
     for i, page in zip(rows, pages):
         row = source.row(i)
         cells = [f"<a href='{html.escape(page.name)}'>{html.escape(page.stem)}</a>", html.escape(str(row["object_id"])),
-                 f"{float(source.values('object_scale')[i]):.3f} m", html.escape(str(row["hand"])),
+                 source.value("scale", i), html.escape(str(row["hand"])),
                  html.escape(str(row.get("task", ""))), html.escape(verdict_line(source, i)[len("Verdict: "):])]
-        cells += [html.escape(format_value(row[c], unit_of(t.schema.field(c)))) for c, _ in metric_cols]
+        cells += [html.escape(format_value(row[c], unit_of(schema.field(c)))) for c, _ in metric_cols]
         lines.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     lines.append("</table>")
     path.write_text("\n".join(lines) + "\n")

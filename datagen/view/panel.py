@@ -63,16 +63,16 @@ def format_value(value, unit: str) -> str:
 
 def verdict_line(source: GraspSource, i: int) -> str:
     """``Verdict: success``, ``Verdict: failure (slipped_+x)`` or ``Verdict: not evaluated``."""
-    verdict = source.verdicts()[i]
-    reason = source.reasons()[i]
+    verdict = source.value("verdict", i)
+    reason = source.value("reason", i) or ""
     return f"Verdict: {verdict}" + (f" ({reason})" if verdict == "failure" and reason else "")
 
 
 def row_markdown(source: GraspSource, i: int) -> str:
     """Markdown of row ``i``: verdict, identity, metrics, per-direction results, other scalars."""
-    t = source.table
+    schema = source.schema
     row = source.row(i)
-    names = t.column_names
+    names = schema.names
     scale_col = source.column("object_scale")
     out = [f"**{verdict_line(source, i)}**", "",
            f"object `{row['object_id']}` at {float(row[scale_col]):.3f} m, hand `{row['hand']}`, "
@@ -82,7 +82,7 @@ def row_markdown(source: GraspSource, i: int) -> str:
     for stem, label in METRICS:
         name = find_column(names, stem)
         if name is not None:
-            out.append(f"| {label} | {format_value(row[name], unit_of(t.schema.field(name)))} |")
+            out.append(f"| {label} | {format_value(row[name], unit_of(schema.field(name)))} |")
             used.add(name)
     moved, turned = source.column("dir_translation_m"), source.column("dir_rotation_deg")
     if moved is not None and row.get(moved) is not None:
@@ -95,9 +95,9 @@ def row_markdown(source: GraspSource, i: int) -> str:
             held = {True: "yes", False: "no", None: "not run"}[ok[k] if k < len(ok) else None]
             out.append(f"| {d} | {held} | {format_value(row[moved][k], 'm')} | {format_value(rot[k] if rot else None, 'deg')} |")
         used.update({moved, turned})
-    rest = [n for n in names if n not in used and not pa.types.is_nested(t.schema.field(n).type)
+    rest = [n for n in names if n not in used and not pa.types.is_nested(schema.field(n).type)
             and n not in ("object_id", "hand", "task", "grasp_id", "object_path")]
     if rest:
         out += ["", "| column | value |", "|---|---|"]
-        out += [f"| {n} | {format_value(row[n], unit_of(t.schema.field(n)))} |" for n in rest]
+        out += [f"| {n} | {format_value(row[n], unit_of(schema.field(n)))} |" for n in rest]
     return "\n".join(out)

@@ -54,7 +54,7 @@ def test_select_row_shows_its_numbers_and_poses(browser, source):
     browser.g_state.value = 1  # grasp
     grasp = np.array([n.position for n in hand])
     posed = browser.cache.posed(source.values("hand")[last], source.object_dir(last),
-                                source.values("object_scale")[last], source.values("task")[last], source.poses(last))
+                                source.scale(last), source.values("task")[last], source.poses(last))
     k = [i for i, g in enumerate(posed.geoms) if browser.drawing.nodes[i] is not None and g.part == "hand"
          and browser.drawing.roles[i] == "hand"]
     np.testing.assert_allclose(grasp, posed.state("grasp")[0][k], atol=1e-6)

@@ -23,12 +23,13 @@ def test_verdict_reason_and_numbers(source):
             assert f"| {d} | {held} | {shown} |" in text
 
 
-def test_not_evaluated_table(source, tmp_path):
+def test_not_evaluated_table(source, job_dir, tmp_path):
     import pyarrow.parquet as pq
 
+    from datagen.io import read_job
     from datagen.view import open_source
 
-    t = source.table.drop_columns(["success", "reason"])
+    t = read_job(job_dir).drop_columns(["success", "reason"])
     t = t.set_column(t.column_names.index("object_path"), "object_path",
                      [[str(source.object_dir(i)) for i in range(len(source))]])
     pq.write_table(t, tmp_path / "grasps.parquet")

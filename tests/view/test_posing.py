@@ -22,7 +22,7 @@ def _mat(q) -> np.ndarray:
 def posed(source):
     i = 0
     return SceneCache(source.eval_config).posed(source.values("hand")[i], source.object_dir(i),
-                                                source.values("object_scale")[i], source.values("task")[i],
+                                                source.scale(i), source.values("task")[i],
                                                 source.poses(i)), source.poses(i)
 
 
@@ -53,7 +53,7 @@ def test_hand_geoms_follow_the_fk(posed, state):
 def test_object_is_the_scaled_convex_pieces(posed, source):
     posed_grasp, _ = posed
     pos, quat, _, _ = posed_grasp.state("grasp")
-    scale = float(source.values("object_scale")[0])
+    scale = source.scale(0)
     pieces = sorted((source.object_dir(0) / "coacd").glob("coacd_convex_piece_*.obj"))
     drawn = [(g, k) for k, g in enumerate(posed_grasp.geoms) if g.part == "object"]
     assert len(drawn) == len(pieces) > 0

@@ -56,7 +56,7 @@ def test_renamed_columns_are_found(job_dir, tmp_path):
     pq.write_table(table, tmp_path / "renamed.parquet")
     src = open_source(tmp_path / "renamed.parquet")
     assert src.column("penetration_m") == "penetration" and src.column("object_scale") == "object_scale_m"
-    assert src.values("object_scale") == t["object_scale"].to_pylist()
+    assert [src.scale(i) for i in range(len(src))] == t["object_scale"].to_pylist()
     assert find_column(["a_deg"], "a") == "a_deg" and find_column(["b"], "b_m") == "b" and find_column([], "c") is None
 
 
@@ -71,3 +71,21 @@ def test_bad_sources_name_the_problem(tmp_path, job_dir):
     (tmp_path / "junk.parquet").write_text("not parquet")
     with pytest.raises(ViewError, match="cannot be read as Parquet"):
         open_source(tmp_path / "junk.parquet")
+
+
+def test_rows_are_read_from_their_shard(job_dir):
+    """Only the index columns stay in memory; a shown row is read from its file, whichever it is."""
+    src = open_source(job_dir)
+    src._cached_files = 1
+    reference = read_job(job_dir).to_pylist()
+    assert len(src.files) > 1
+    for i in list(range(len(src))) + list(range(len(src)))[::-1]:  # crossing files both ways
+        row = src.row(i)
+        assert row["grasp_id"] == reference[i]["grasp_id"]
+        assert row["grasp_qpos"] == reference[i]["grasp_qpos"]
+        assert src.value("object_id", i) == reference[i]["object_id"]
+        assert src.value("verdict", i) == ("success" if reference[i]["success"] else "failure")
+    assert len(src._tables) == 1
+    assert src.options("object_id") == list(dict.fromkeys(r["object_id"] for r in reference))
+    with pytest.raises(IndexError):
+        src.row(len(src))
