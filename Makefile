@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	# torch first, from the local CPU wheel: a later torch request is then already
 	# satisfied and never resolves a CUDA build.
 	$(PY) -m pip install --quiet '$(TORCH)'
-	$(PY) -m pip install --quiet '$(TORCH)' -e '.[dev]'
+	$(PY) -m pip install --quiet '$(TORCH)' -e '.[dev,view]'
 	$(PY) -c "import torch, sys; v = torch.__version__; sys.exit(0 if v.startswith('2.13.0') else 'unexpected torch ' + v)"
 	touch $(STAMP)
 
@@ -101,3 +101,14 @@ bench-pipeline: $(STAMP)
 BENCH_TASKS_ARGS ?=
 bench-tasks: $(STAMP)
 	$(PY) -m benchmarks.bench_tasks $(BENCH_TASKS_ARGS)
+
+# Dataset browser (issue 21): `datagen view JOB` serves the page; its browser test drives headless
+# Chromium from the distribution (Debian `chromium`, over the DevTools protocol: no driver, no
+# browser download) and skips without it. `make browser` installs it (root, apt); `make test-view`
+# runs the viewer's tests with it.
+.PHONY: browser test-view
+browser:
+	@test -x /usr/bin/chromium || (apt-get update && apt-get install -y --no-install-recommends chromium)
+
+test-view: $(STAMP) browser
+	$(PY) -m pytest -q tests/view

@@ -31,6 +31,7 @@ REGISTRARS: dict[str, str] = {
     "report": "workers.cli:register_report",
     "export": "datagen.interop.commands:register_export",
     "import": "datagen.interop.commands:register_import",
+    "view": "datagen.view.commands:register_view",
 }
 # domain errors printed as one line with exit status 2 (module:class, looked up only if imported)
 _ERRORS = ("datagen.objects.errors:ObjectError", "workers.job:JobError", "datagen.gl:GLUnavailable")
