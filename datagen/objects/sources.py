@@ -9,6 +9,9 @@ Source URIs (the ``--source`` argument and the manifest's ``source`` field):
 - ``dir:ROOT``: every obj/stl/ply/off/glb file under ROOT (recursive, sorted); the path is the
   file's path relative to ROOT.
 - ``pybullet``: pybullet_data/random_urdfs/<n>/<n>.obj (needs the optional pybullet package).
+- ``pkg:MODULE[/SUBDIR]``: the files of an installed Python package (e.g.
+  ``pkg:pybullet_data``, ``pkg:metaworld/assets/objects/meshes``), like ``dir:`` but the root is
+  looked up where the package is installed, so a manifest of such objects works on any machine.
 - ``tasks``: the ten task-benchmark objects (``task_objects.py``); the path is the object name,
   e.g. ``"knob3"``, the id ``task-<name>``. Their convex parts are exact (no CoACD) and a built
   manifest gives each its own scale (its joint anchor is in metres at that scale).
@@ -83,8 +86,11 @@ def canonical_source(uri: str) -> str:
         return f"dir:{_pybullet_root()}"
     if kind == "tasks" and not arg:
         return "tasks"
+    if kind == "pkg" and arg:
+        module, _, sub = arg.strip("/").partition("/")
+        return f"pkg:{module}" + (f"/{Path(sub).as_posix()}" if sub else "")
     raise SourceError(Reason.UNKNOWN_SOURCE, uri,
-                      "use procedural[:SEED], dexgraspnet:PATH, dir:PATH, pybullet or tasks")
+                      "use procedural[:SEED], dexgraspnet:PATH, dir:PATH, pkg:MODULE[/SUBDIR], pybullet or tasks")
 
 
 def _procedural_seed(uri: str) -> int:
@@ -98,7 +104,21 @@ def _procedural_seed(uri: str) -> int:
 
 def _root(source: str) -> Path | None:
     kind, _, arg = source.partition(":")
+    if kind == "pkg":
+        return _package_root(arg)
     return None if kind in ("procedural", "tasks") else Path(arg)
+
+
+def _package_root(arg: str) -> Path:
+    """``MODULE[/SUBDIR]`` -> the folder of the installed package MODULE (not imported) / SUBDIR."""
+    import importlib.util
+
+    module, _, sub = arg.partition("/")
+    spec = importlib.util.find_spec(module) if module.isidentifier() else None
+    if spec is None or not spec.submodule_search_locations:
+        raise SourceError(Reason.UNKNOWN_SOURCE, f"pkg:{arg}",
+                          f"Python package {module!r} is not installed (e.g. `make real-objects`)")
+    return Path(list(spec.submodule_search_locations)[0]) / sub
 
 
 def _pybullet_root() -> Path:
@@ -132,7 +152,7 @@ def iter_source(uri: str, count: int | None = None) -> Iterator[ObjectRef]:
         for name in task_objects.TASK_OBJECTS[:count]:
             yield ObjectRef(task_objects.object_id(name), source, name, "obj", name)
         return
-    root = Path(arg)
+    root = _root(source)
     if not root.is_dir():
         raise SourceError(Reason.UNKNOWN_SOURCE, uri, f"source folder {root} does not exist")
     if kind == "dexgraspnet":

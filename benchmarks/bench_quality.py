@@ -1,0 +1,163 @@
+"""Grasp quality on real objects: the default force-closure job, per hand x scale x object family.
+
+Runs the product itself, ``datagen run`` (Ray, the default job config, nothing relaxed) on the
+real-object development set ``manifests/real_dev.jsonl`` (household meshes from pybullet and
+metaworld, ``make real-objects``) for each hand, then reads the job's rows. Every synthesized
+pose is a row: a pose rejected before simulation counts as a failure with its reason.
+
+Reported per hand x scale and per object family: six-direction success, the share of poses in
+force closure at synthesis (synthesis epsilon > 0), MuJoCo's epsilon at the grasp, the successes'
+penetration at the grasp (p90, mm), successes without any touching link (must be 0), failure
+classes (never force closure at synthesis; rejected for pregrasp penetration; no contact;
+slipped), and synthesis seconds per grasp. Writes ``benchmarks/results/quality.md`` ending with
+``quality: shadow=S e3m5=E allegro=A leap=L`` (percent; default settings; real objects).
+
+Usage: ``make bench-quality`` or ``python -m benchmarks.bench_quality --hands shadow --grasps 8``;
+``--synth '{"seeds_per_grasp": 1}'`` runs a variant (its rows are reported but it does not write
+the machine-readable line unless the variant is empty).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.common import machine_description
+from datagen.io import read_job
+from datagen.objects.manifest import load_manifest
+from workers.job import code_version
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = ROOT / "manifests" / "real_dev.jsonl"
+RESULTS = ROOT / "benchmarks" / "results" / "quality.md"
+HANDS = {"shadow": "shadow", "shadow_e3m5": "e3m5", "allegro": "allegro", "leap": "leap"}
+COLUMNS = ["object_id", "object_scale_m", "success", "reason", "synth_epsilon", "epsilon", "penetration_m",
+           "touching_links"]
+
+
+def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict) -> float:
+    """``datagen run`` of the default force-closure job for ``hand``; returns its wall seconds."""
+    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(MANIFEST),
+           "--objects", str(objects), "--hand", hand, "--tasks", "force_closure", "--grasps", str(grasps),
+           "--no-progress"]
+    if synth:
+        from workers.job import JobConfig
+
+        cfg = out.with_suffix(".yaml")
+        cfg.parent.mkdir(parents=True, exist_ok=True)
+        cfg.write_text(json.dumps({"synth": {**JobConfig().synth, **synth}}))
+        cmd += ["--config", str(cfg)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, cwd=ROOT)
+    return time.perf_counter() - t0
+
+
+def failure_classes(rows: dict) -> collections.Counter:
+    """Each failed row's class: why it failed, in the order a reader would ask."""
+    out = collections.Counter()
+    for ok, reason, eps in zip(rows["success"], rows["reason"], rows["synth_epsilon"]):
+        if ok:
+            continue
+        if reason in ("penetration", "grasp_penetration", "self_penetration"):
+            out["rejected: " + reason] += 1
+        elif reason == "no_contact":
+            out["no contact at the grasp"] += 1
+        elif not eps > 0:
+            out["not force closure at synthesis, " + reason] += 1
+        else:
+            out["force closure at synthesis, " + reason] += 1
+    return out
+
+
+def summarize(rows: dict, sel: np.ndarray) -> dict:
+    ok = np.asarray(rows["success"], dtype=bool)[sel]
+    pen = np.asarray(rows["penetration_m"], dtype=float)[sel]
+    touch = np.asarray(rows["touching_links"])[sel]
+    return {"n": int(sel.sum()), "success": 100 * float(ok.mean()) if ok.size else float("nan"),
+            "fc": 100 * float((np.asarray(rows["synth_epsilon"], dtype=float)[sel] > 0).mean()) if ok.size else float("nan"),
+            "eps": float(np.median(np.asarray(rows["epsilon"], dtype=float)[sel])) if ok.size else float("nan"),
+            "pen90": 1000 * float(np.percentile(pen[ok], 90)) if ok.any() else float("nan"),
+            "no_touch": int((touch[ok] == 0).sum())}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hands", default=",".join(HANDS), help="comma-separated hands")
+    ap.add_argument("--grasps", type=int, default=8, help="grasps per object and scale")
+    ap.add_argument("--leap-grasps", type=int, default=4, help="grasps per object and scale for leap (slow)")
+    ap.add_argument("--objects", type=int, default=14, help="objects of the manifest (first N)")
+    ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")
+    ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="job directories")
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    args = ap.parse_args()
+    synth = json.loads(args.synth)
+    commit = code_version()
+    families = {e.id: e.family for e in load_manifest(MANIFEST)}
+    lines = ["# Grasp quality on real objects (default force-closure job)", "",
+             f"Code {commit}; machine: {machine_description()}.", "",
+             f"Objects: `manifests/real_dev.jsonl`, the first {args.objects} (pybullet and metaworld household "
+             "meshes, never used to choose a setting before this table was first made). Each hand runs the default "
+             "`datagen run` job (`--tasks force_closure`, the job's default synthesis and evaluation, the unchanged "
+             "six-direction MuJoCo test: 1 N for 2 s per direction, < 5 cm and < 15 deg). Every synthesized pose "
+             "is a row; rejections count as failures." + (f" Variant: synth {synth}." if synth else ""), ""]
+    headline = {}
+    for hand in args.hands.split(","):
+        grasps = args.leap_grasps if hand == "leap" else args.grasps
+        tag = "" if not synth else "-" + "-".join(f"{k}{v}" for k, v in sorted(synth.items()))
+        job = args.work / f"{hand}-{commit}-g{grasps}-o{args.objects}{tag}"
+        wall = run_job(hand, job, grasps, args.objects, synth)
+        rows = read_job(job, columns=COLUMNS).to_pydict()
+        ledger = [json.loads(p.read_text()) for p in sorted((job / "ledger").glob("*.json"))]
+        synth_s = sum(x["timings"].get("synth_s", 0) for x in ledger)
+        n = len(rows["success"])
+        scales = np.round(np.asarray(rows["object_scale_m"], dtype=float), 4)
+        fam = np.array([families.get(o, "?") for o in rows["object_id"]])
+        everything = summarize(rows, np.ones(n, dtype=bool))
+        headline[hand] = everything["success"]
+        lines += [f"## {hand}", "",
+                  f"{n} poses ({grasps} per object and scale), job wall {wall:.0f} s on {os.cpu_count()} cores "
+                  f"(synthesis {synth_s / max(n, 1):.2f} s per grasp of shard time).", "",
+                  "| rows | n | success % | force closure at synthesis % | MuJoCo epsilon (median) | "
+                  "successes' penetration p90 mm | successes without contact |", "|---|---|---|---|---|---|---|"]
+
+        def row(name, s):
+            return (f"| {name} | {s['n']} | {s['success']:.1f} | {s['fc']:.0f} | {s['eps']:.3f} | {s['pen90']:.2f} | "
+                    f"{s['no_touch']} |")
+
+        lines.append(row("all", everything))
+        lines += [row(f"scale {s:g} m", summarize(rows, scales == s)) for s in sorted(set(scales.tolist()))]
+        lines += [row(f"family {f}", summarize(rows, fam == f)) for f in sorted(set(fam.tolist()))]
+        lines += ["", "Failure classes: " + ", ".join(f"{k} {v}" for k, v in failure_classes(rows).most_common())
+                  + ".", ""]
+        print(f"{hand}: {everything['success']:.1f}% of {n}", flush=True)
+    notes = _notes(args.out)
+    lines += notes
+    if not synth:
+        lines.append("quality: " + " ".join(f"{HANDS[h]}={headline[h]:.1f}" if h in headline else f"{HANDS[h]}=n/a"
+                                            for h in HANDS))
+    if not synth:
+        args.out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines[-1:]))
+
+
+def _notes(path: Path) -> list[str]:
+    """The hand-written section (from '## Notes' to the machine-readable line), kept across runs."""
+    if not path.is_file():
+        return []
+    text = path.read_text().splitlines()
+    if "## Notes" not in text:
+        return []
+    notes = text[text.index("## Notes"):]
+    return [x for x in notes if not x.startswith("quality: ")]
+
+
+if __name__ == "__main__":
+    main()
