@@ -160,6 +160,19 @@ class JobConfig:
         else:
             raise JobError(f"unknown hand {self.hand!r}; valid hands: {', '.join(names)} "
                            "(or the path of a hand spec YAML)")
+        from datagen.objects.errors import ObjectError
+        from datagen.objects.manifest import load_manifest
+        from datagen.objects.sources import canonical_source
+
+        try:
+            if self.manifest:
+                load_manifest(self.manifest)
+            else:
+                kind, _, root = canonical_source(self.source).partition(":")
+                if kind in ("dir", "dexgraspnet") and not Path(root).is_dir():
+                    raise JobError(f"source {self.source!r}: {root} is not a folder")
+        except ObjectError as exc:
+            raise JobError(str(exc)) from None
         for t in self.tasks:
             try:
                 load_task(t)

@@ -51,7 +51,7 @@ def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
 
     if job.manifest_path.is_file():
         try:
-            return load_manifest(job.manifest_path)
+            return load_manifest(job.manifest_path, check_paths=False)
         except ManifestError as exc:
             raise JobError(f"job {job.path}: its manifest no longer loads ({exc}); start the job in a new "
                            "--out") from None
@@ -136,7 +136,10 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
     cfg.check_runnable()
     job = JobDir(out)
     _check_out(job.path)
-    job.lock()
+    try:
+        job.lock()
+    except OSError as exc:
+        raise JobError(f"--out {job.path}: cannot create the job directory: {exc.strerror}") from None
     try:
         resumed = job.init(cfg)
         doc = job.read_job()

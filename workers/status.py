@@ -30,7 +30,7 @@ def job_status(path: str | Path) -> dict:
 
     job = JobDir(path)
     cfg = job.config()
-    n_objects = len(load_manifest(job.manifest_path)) if job.manifest_path.is_file() else cfg.count
+    n_objects = len(load_manifest(job.manifest_path, check_paths=False)) if job.manifest_path.is_file() else cfg.count
     total = len(shard_slices(n_objects, cfg.objects_per_shard))
     done = job.finished()
     grasps = success = 0

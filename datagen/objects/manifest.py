@@ -23,7 +23,7 @@ from typing import Iterable
 
 from .errors import ManifestError, ObjectError, Reason, SourceError
 from . import task_objects
-from .sources import ObjectRef, iter_source, resolve
+from .sources import ObjectRef, canonical_source, iter_source, resolve
 
 __all__ = ["DEFAULT_SCALES", "ManifestEntry", "Rejected", "split_of", "build_manifest", "write_manifest",
            "load_manifest"]
@@ -131,7 +131,7 @@ def write_manifest(entries: Iterable[ManifestEntry], path: str | Path) -> Path:
     return path
 
 
-def _entry(obj, where: str) -> ManifestEntry:
+def _entry(obj, where: str, check_paths: bool = True) -> ManifestEntry:
     if not isinstance(obj, dict):
         raise ManifestError(Reason.MALFORMED_LINE, where, "a line must be a JSON object")
     missing, extra = set(_FIELDS) - set(obj), set(obj) - set(_FIELDS)
@@ -156,7 +156,9 @@ def _entry(obj, where: str) -> ManifestEntry:
     e = ManifestEntry(obj["id"], obj["source"], obj["path"], obj["family"], obj["sha256"],
                       tuple(float(s) for s in sc), obj["split"])
     try:
-        e.ref()  # source known, path inside its root
+        canonical_source(e.source)  # source known
+        if check_paths:
+            e.ref()  # path inside its root (follows symlinks, so it depends on the files now)
     except SourceError as exc:
         raise ManifestError(Reason.UNKNOWN_SOURCE, where, exc.detail) from exc
     except ManifestError as exc:
@@ -164,8 +166,11 @@ def _entry(obj, where: str) -> ManifestEntry:
     return e
 
 
-def load_manifest(path: str | Path) -> list[ManifestEntry]:
-    """Read and validate a manifest; the first bad line raises ManifestError naming it."""
+def load_manifest(path: str | Path, check_paths: bool = True) -> list[ManifestEntry]:
+    """Read and validate a manifest; the first bad line raises ManifestError naming it.
+    ``check_paths=False`` skips the file-system checks of each path (a job reading back its own
+    manifest: its files are checked when each object is processed, and a file changed since must
+    cost that object, not the job)."""
     path = Path(path)
     entries, seen = [], {}
     try:
@@ -186,7 +191,7 @@ def load_manifest(path: str | Path) -> list[ManifestEntry]:
             raise ManifestError(Reason.MALFORMED_LINE, where, f"not JSON ({exc.msg})") from exc
         except RecursionError:
             raise ManifestError(Reason.MALFORMED_LINE, where, "JSON nested too deeply") from None
-        e = _entry(obj, where)
+        e = _entry(obj, where, check_paths)
         if e.id in seen:
             raise ManifestError(Reason.DUPLICATE_ID, where, f"id {e.id!r} already on line {seen[e.id]}")
         seen[e.id] = n

@@ -208,7 +208,10 @@ def resolve(source: str, path: str, object_id: str, family: str = "") -> ObjectR
         if not path.isdigit():
             raise ManifestError(Reason.SCHEMA, object_id, f"procedural path must be an index, got {path!r}")
         return ObjectRef(object_id, source, path, "obj", family)
-    target = (root / path).resolve()
+    try:
+        target = (root / path).resolve()
+    except (RuntimeError, OSError) as exc:  # a symlink loop
+        raise ManifestError(Reason.NOT_A_FILE, object_id, f"path {path!r} cannot be resolved: {exc}") from None
     if Path(path).is_absolute() or not target.is_relative_to(root.resolve()):
         raise ManifestError(Reason.PATH_ESCAPES_ROOT, object_id,
                             f"path {path!r} resolves outside the source root {root}")
