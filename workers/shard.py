@@ -251,7 +251,12 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         t0 = time.perf_counter()
         try:
             scfg_k = dataclasses.replace(scfg, seed=shard_seed(cfg, index))
-            result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object)
+            base_units = progress.done
+
+            def moved(it, *_):  # progress per optimizer iteration (reads nothing of the state)
+                progress.set(base_units + n_targets * (it + 1) / max(scfg_k.iters, 1))
+
+            result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object, callback=moved)
             table = result_table(result, targets, hand, task, scfg_k)
         except Exception as exc:  # noqa: BLE001
             for t in targets:
@@ -260,7 +265,7 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             timings["synth_s"] += time.perf_counter() - t0
             continue
         timings["synth_s"] += time.perf_counter() - t0
-        progress.add(n_targets)
+        progress.set(base_units + n_targets)
         # 4. MuJoCo evaluation, per object so one bad object costs only its rows
         t0 = time.perf_counter()
         for t in targets:
@@ -313,9 +318,10 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
 
 class ShardProgress:
     """A running shard's progress, ``{"done": units, "total": units}`` in a small JSON file the
-    driver polls (written atomically, at most every 0.5 s). Units: per object processed and
-    per target built, then per task the synthesis of the batch and the evaluation of each object
-    and scale, weighted alike (a rough but steady measure of work)."""
+    driver polls (written atomically, at most every 0.5 s). Units: one per object processed and
+    one per object whose target is built; then per task, as many for the synthesis of the batch
+    (moving with its iterations) and as many again for its evaluation as the shard has objects x
+    scales. A rough but steady measure of work: synthesis and evaluation dominate a shard."""
 
     def __init__(self, path: Path, total: float):
         self.path, self.total, self.done, self._last = path, float(total), 0.0, 0.0
