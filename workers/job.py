@@ -39,7 +39,8 @@ from typing import Any
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
 
-__all__ = ["EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions", "shard_slices"]
+__all__ = ["EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
+           "shard_slices"]
 
 
 PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running shard's progress

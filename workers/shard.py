@@ -12,6 +12,7 @@ import dataclasses
 import json
 import multiprocessing as mp
 import os
+import pickle
 import shutil
 import socket
 import time
@@ -175,7 +176,20 @@ def task_targets(task, targets: list) -> list:
 def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     """Run shard ``index`` over manifest ``entries`` (dicts of ManifestEntry fields) and write
     its shard, failures and ledger entry. Returns the ledger summary. Idempotent: a rerun
-    overwrites the same files with the same rows."""
+    overwrites the same files with the same rows. An exception that cannot be pickled (Ray
+    would report it as ``UnserializableException``, losing its cause) is raised as a
+    RuntimeError carrying its type and message."""
+    try:
+        return _run_shard(job_path, index, entries, cfg_dict, provenance)
+    except Exception as exc:
+        try:
+            pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001
+            raise RuntimeError(f"shard {index}: {type(exc).__name__}: {exc}") from None
+        raise
+
+
+def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     import torch
 
     from datagen.objects.manifest import ManifestEntry

@@ -185,3 +185,22 @@ def test_retry_failed_redoes_a_timeout_with_a_longer_limit(tmp_path, cache_dir):
         assert (out / "ray").stat().st_mode & 0o777 == 0o700
     finally:
         shutil.rmtree(short, ignore_errors=True)
+
+
+def test_an_unpicklable_shard_error_keeps_its_cause(tmp_path, mesh_source, monkeypatch):
+    import pickle
+
+    import workers.shard as shard_mod
+
+    class Unpicklable(Exception):
+        def __init__(self, thing, reason):
+            super().__init__(f"{thing}: {reason}")
+
+    def broken(*a, **k):
+        raise Unpicklable("hand 'x'", "asset missing on this node")
+
+    monkeypatch.setattr(shard_mod, "_run_shard", broken)
+    with pytest.raises(RuntimeError) as info:
+        shard_mod.run_shard(str(tmp_path), 3, [], {}, {})
+    assert str(info.value) == "shard 3: Unpicklable: hand 'x': asset missing on this node"
+    pickle.loads(pickle.dumps(info.value))  # Ray can ship it
