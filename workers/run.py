@@ -136,6 +136,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
     cfg.check_runnable()
     job = JobDir(out)
     _check_out(job.path)
+    _check_cache(cache)
     try:
         job.lock()
     except OSError as exc:
@@ -180,6 +181,20 @@ def _check_out(path: Path) -> None:
         probe = probe.parent
     if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
         raise JobError(f"--out {path}: cannot write in {probe} (permission denied); choose another --out")
+
+
+def _check_cache(cache: str | None) -> None:
+    """The objects cache root exists or can be made, and is writable (JobError otherwise)."""
+    from datagen.objects.cache import cache_root
+
+    root = cache_root(cache or os.environ.get("DATAGEN_CACHE") or None)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise JobError(f"objects cache {root}: cannot create it ({exc.strerror}); set --cache or "
+                       "$DATAGEN_CACHE to a writable folder") from None
+    if not os.access(root, os.W_OK | os.X_OK):
+        raise JobError(f"objects cache {root} is not writable; set --cache or $DATAGEN_CACHE to a writable folder")
 
 
 def _progress_units(job: JobDir, slices, running) -> float:

@@ -124,6 +124,7 @@ COMMANDS = {
     "`--out` an existing file": lambda t, c, m: _run(t, c, out=_file(t / "f")),
     "`--out` in a read-only folder": lambda t, c, m: _read_only_out(t, c),
     "`--out` of another job's config": lambda t, c, m: _different_job(t, c),
+    "`--cache` an existing file": lambda t, c, m: _run(t, c, "--cache", str(_file(t / "c"))),
     "`--out` of a running job": lambda t, c, m: _locked(t, c),
     "Ctrl-C during `run`": lambda t, c, m: _interrupted(t, c, m),
     "manifest line nested 100000 deep": lambda t, c, m: _manifest_check(t, c, "[" * 100_000 + "]" * 100_000 + "\n"),

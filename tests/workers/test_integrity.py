@@ -204,3 +204,16 @@ def test_an_unpicklable_shard_error_keeps_its_cause(tmp_path, mesh_source, monke
         shard_mod.run_shard(str(tmp_path), 3, [], {}, {})
     assert str(info.value) == "shard 3: Unpicklable: hand 'x': asset missing on this node"
     pickle.loads(pickle.dumps(info.value))  # Ray can ship it
+
+
+def test_a_ray_task_error_becomes_one_clean_line():
+    from workers.run import error_line
+
+    class FakeRayTaskError(Exception):  # what ray.get raises: a traceback with colours, and the cause
+        def __init__(self, cause):
+            super().__init__("\x1b[36mray::run_shard()\x1b[39m (pid=1, ip=10.0.0.1)\n  File x, line 3\n"
+                             + f"{type(cause).__name__}: {cause}")
+            self.cause = cause
+
+    assert error_line(FakeRayTaskError(ValueError("unknown task 'nope'"))) == "ValueError: unknown task 'nope'"
+    assert error_line(RuntimeError("\x1b[31mboom\x1b[0m\n")) == "RuntimeError: boom"
