@@ -80,7 +80,8 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
     `load_manifest` validates a line, so a built manifest always loads. Objects that cannot be
     entries (a missing or unreadable file, a directory or device, a path or symlink leaving the
     source root) are appended to ``rejected`` as `Rejected`, or, when it is None, reported on
-    stderr. Objects of the ``tasks`` source get their own scale instead of ``scales``."""
+    stderr. ``count`` counts accepted objects (a rejected file does not take an object's place).
+    Objects of the ``tasks`` source get their own scale instead of ``scales``."""
     scales = tuple(float(s) for s in scales)
     if not scales or min(scales) <= 0:
         raise ValueError(f"manifest scales must be positive metres, got {scales}")
@@ -88,10 +89,13 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
         raise ValueError(f"manifest scales must be distinct, got {scales}")
     if not 0 <= test_fraction <= 1:
         raise ValueError(f"test_fraction must be in [0, 1], got {test_fraction}")
-    refs = list(iter_source(source, count))
+    # file sources are enumerated lazily until `count` objects are accepted: a rejected entry does
+    # not take an object's place
+    lazy = canonical_source(source).partition(":")[0] in ("dir", "dexgraspnet")
+    refs = iter_source(source, None if lazy else count)
     if progress:
         from tqdm import tqdm
-        refs = tqdm(refs, desc="hashing", unit="obj")
+        refs = tqdm(refs, desc="hashing", unit="obj", total=count)
     out = []
 
     def reject(ref, exc: ObjectError):
@@ -102,6 +106,8 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
             rejected.append(r)
 
     for ref in refs:
+        if count is not None and len(out) >= count:
+            break
         try:
             resolve(ref.source, ref.path, ref.object_id, ref.family)  # inside the root, before reading
             sha = hashlib.sha256(ref.read_bytes()).hexdigest()

@@ -128,3 +128,14 @@ def test_config_yaml_refuses_tags_aliases_and_wrong_types(tmp_path):
     (tmp_path / "typed.yaml").write_text("coacd_threshold: lots\n")
     with pytest.raises(ValueError, match="ProcessConfig.coacd_threshold must be a number, got 'lots'"):
         ProcessConfig.from_yaml(tmp_path / "typed.yaml")
+
+
+def test_a_rejected_entry_does_not_take_an_objects_place(tmp_path, box_obj):
+    root = tmp_path / "src"
+    (root / "a_dir.obj").mkdir(parents=True)  # sorts first
+    for name in ("b.obj", "c.obj", "d.obj"):
+        (root / name).write_bytes(box_obj)
+    rejected = []
+    entries = build_manifest(f"dir:{root}", 2, rejected=rejected)
+    assert [e.id for e in entries] == ["b.obj", "c.obj"]
+    assert [r.id for r in rejected] == ["a_dir.obj"]
