@@ -137,6 +137,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
     job = JobDir(out)
     _check_out(job.path)
     _check_cache(cache)
+    existed = job.path.exists()
     try:
         job.lock()
     except OSError as exc:
@@ -144,7 +145,12 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
     try:
         resumed = job.init(cfg)
         doc = job.read_job()
-        entries = prepare_manifest(job, cfg)
+        try:
+            entries = prepare_manifest(job, cfg)
+        except Exception:
+            if not resumed:  # leave no half job behind to refuse the corrected command
+                _discard_new_job(job, remove_dir=not existed)
+            raise
         slices = shard_slices(len(entries), cfg.objects_per_shard)
         done = job.finished()
         retry = retryable_shards(job, done) if retry_failed else []
@@ -170,6 +176,25 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         return status
     finally:
         job.unlock()
+
+
+def _discard_new_job(job: JobDir, remove_dir: bool) -> None:
+    """Remove what `JobDir.init` and `prepare_manifest` wrote for a job that never started."""
+    from datagen.io.layout import FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, OBJECTS_DIR, SHARDS_DIR
+
+    for f in (job.path / JOB_JSON, job.manifest_failures_path, job.manifest_path):
+        f.unlink(missing_ok=True)
+    for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
+        try:
+            (job.path / d).rmdir()
+        except OSError:
+            pass
+    if remove_dir:
+        (job.path / LOCK).unlink(missing_ok=True)
+        try:
+            job.path.rmdir()
+        except OSError:
+            pass
 
 
 def _check_out(path: Path) -> None:

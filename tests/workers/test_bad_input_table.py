@@ -62,6 +62,12 @@ def _file(path: Path) -> Path:
     return path
 
 
+def _folder(path: Path) -> Path:
+    path.mkdir()
+    (path / "notes.txt").write_text("no mesh here")
+    return path
+
+
 def _manifest_check(tmp, capsys, text: str) -> tuple[int, str]:
     (tmp / "m.jsonl").write_text(text)
     code = cli.main(["manifest", "check", str(tmp / "m.jsonl")])
@@ -114,6 +120,7 @@ COMMANDS = {
     "`run --tasks nope`": lambda t, c, m: _run(t, c, "--tasks", "nope"),
     "`run --seed -1`": lambda t, c, m: _run(t, c, "--seed", "-1"),
     "`run --source ftp:x`": lambda t, c, m: _run(t, c, "--source", "ftp:x"),
+    "`run --source dir:` of a folder without meshes": lambda t, c, m: _run(t, c, "--source", f"dir:{_folder(t / 'e')}"),
     "`run --manifest missing.jsonl`": lambda t, c, m: _run(t, c, "--manifest", str(t / "missing.jsonl")),
     "config `grasps_per_object: many`": lambda t, c, m: _run(t, c, config="grasps_per_object: many\n"),
     "config `cuont: 3`": lambda t, c, m: _run(t, c, config="cuont: 3\n"),
