@@ -26,7 +26,7 @@ import pyarrow.parquet as pq
 from schemas import arrow_schema
 
 from .job import JobConfig, JobDir, JobError, code_version, package_versions, shard_slices
-from .shard import run_shard, write_table_atomic
+from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
            "MAX_RAY_TEMP_LEN"]
@@ -63,8 +63,9 @@ def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
                   file=sys.stderr)
     else:
         entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction, rejected=rejected)
-    rows = [{"object_id": r.id, "object_scale": float("nan"), "task": "", "stage": "manifest", "reason": r.reason,
-             "message": r.message, "shard": -1} for r in rejected]
+    rows: list[dict] = []
+    for r in rejected:  # shard -1: before any shard
+        _failure(rows, -1, r.id, "manifest", r.reason, r.message)
     write_table_atomic(pa.Table.from_pylist(rows, schema=arrow_schema("failures")), job.manifest_failures_path)
     if not entries:
         raise JobError(f"job {job.path}: the manifest is empty (source {cfg.source!r}, manifest {cfg.manifest!r})"

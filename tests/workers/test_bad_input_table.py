@@ -49,7 +49,7 @@ def _src(tmp: Path) -> str:
 
 
 def _run(tmp, capsys, *extra, config: str | None = None, out: Path | None = None) -> tuple[int, str]:
-    args = ["run", "--out", str(out or tmp / "job"), "--source", _src(tmp), "--scale", "1", "--no-progress"]
+    args = ["run", "--out", str(out or tmp / "job"), "--source", _src(tmp), "--no-progress"]
     if config is not None:
         (tmp / "job.yaml").write_text(config)
         args += ["--config", str(tmp / "job.yaml")]

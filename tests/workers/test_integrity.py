@@ -86,7 +86,7 @@ def test_bad_settings_are_refused_before_any_work(flag, value, named, valid, tmp
     import ray
 
     out = tmp_path / "job"
-    code = cli.main(["run", "--out", str(out), "--source", mesh_source, "--scale", "3", flag, value, "--no-progress"])
+    code = cli.main(["run", "--out", str(out), "--source", mesh_source, flag, value, "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2
     assert named in err and valid in err, err
