@@ -179,6 +179,9 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
     overwrites the same files with the same rows. An exception that cannot be pickled (Ray
     would report it as ``UnserializableException``, losing its cause) is raised as a
     RuntimeError carrying its type and message."""
+    cache, before = provenance.get("cache") or None, os.environ.get("DATAGEN_CACHE")
+    if cache:  # the hand cache (flattened MJCFs) follows the objects cache, for this shard only
+        os.environ["DATAGEN_CACHE"] = cache
     try:
         return _run_shard(job_path, index, entries, cfg_dict, provenance)
     except Exception as exc:
@@ -187,6 +190,11 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         except Exception:  # noqa: BLE001
             raise RuntimeError(f"shard {index}: {type(exc).__name__}: {exc}") from None
         raise
+    finally:
+        if before is None:
+            os.environ.pop("DATAGEN_CACHE", None)
+        else:
+            os.environ["DATAGEN_CACHE"] = before
 
 
 def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
@@ -205,8 +213,6 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
-    if cache:  # the hand cache (flattened MJCFs) follows the objects cache
-        os.environ["DATAGEN_CACHE"] = cache
     n_targets = sum(len(d["scales"]) for d in entries)
     progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets)
     timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}

@@ -217,3 +217,16 @@ def test_a_ray_task_error_becomes_one_clean_line():
 
     assert error_line(FakeRayTaskError(ValueError("unknown task 'nope'"))) == "ValueError: unknown task 'nope'"
     assert error_line(RuntimeError("\x1b[31mboom\x1b[0m\n")) == "RuntimeError: boom"
+
+
+def test_a_shard_uses_the_jobs_cache_for_its_hand_and_restores_the_environment(tmp_path, monkeypatch):
+    import os
+
+    import workers.shard as shard_mod
+
+    seen = []
+    monkeypatch.setenv("DATAGEN_CACHE", str(tmp_path / "mine"))
+    monkeypatch.setattr(shard_mod, "_run_shard", lambda *a: seen.append(os.environ["DATAGEN_CACHE"]) or {})
+    shard_mod.run_shard(str(tmp_path), 0, [], {}, {"cache": str(tmp_path / "job_cache")})
+    assert seen == [str(tmp_path / "job_cache")]
+    assert os.environ["DATAGEN_CACHE"] == str(tmp_path / "mine")
