@@ -30,6 +30,12 @@ def register_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
     p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
+    p.add_argument("--object-timeout", type=float, default=None, metavar="SECONDS",
+                   help="per-object processing limit (JobConfig.object_timeout_s, default 300); an execution "
+                        "setting: a resumed job may change it")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="also rerun finished shards with failures a rerun may fix (timeout, crashed, error, "
+                        "missing_file, ...); failures decided by a mesh's bytes are final")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -40,20 +46,52 @@ def _renamed_scale(value: str):
 
 
 def _config(args):
-    import yaml
+    from datagen.objects.config import read_yaml
 
-    from .job import JobConfig
+    from .job import JobConfig, JobError
 
-    data = yaml.safe_load(open(args.config)) if args.config else {}
+    try:
+        data = read_yaml(args.config, "job config") if args.config else {}
+    except ValueError as exc:
+        raise JobError(str(exc)) from None
+    if data is not None and not isinstance(data, dict):
+        raise JobError(f"{args.config}: a job config must be a mapping of JobConfig fields")
     data = dict(data or {})
     for key, val in (("count", args.count), ("source", args.source), ("manifest", args.manifest),
                      ("hand", args.hand), ("grasps_per_object", args.grasps),
-                     ("objects_per_shard", args.objects_per_shard), ("seed", args.seed)):
+                     ("objects_per_shard", args.objects_per_shard), ("seed", args.seed),
+                     ("object_timeout_s", args.object_timeout)):
         if val is not None:
             data[key] = val
     if args.tasks:
         data["tasks"] = [t.strip() for t in args.tasks.split(",") if t.strip()]
     return JobConfig.from_dict(data, where=args.config or "command line")
+
+
+def closing_summary(status: dict) -> str:
+    """Where the data is and what to run next, printed at the end of ``datagen run``."""
+    from pathlib import Path
+
+    job = Path(status["job"])
+    shards = sorted((job / "shards").glob("part-*.parquet"))
+    lines = []
+    if shards:
+        names = shards[0].name if len(shards) == 1 else f"{shards[0].name} .. {shards[-1].name}"
+        lines.append(f"data: {len(shards)} Parquet shard{'s' * (len(shards) > 1)} in {job / 'shards'} ({names}); "
+                     f"failures in {job / 'failures.parquet'}")
+    else:
+        lines.append(f"data: no grasp rows yet in {job / 'shards'}; failures in {job / 'failures.parquet'}")
+    if not status["complete"]:
+        lines.append(f"incomplete: {status['shards_done']}/{status['shards_total']} shards; rerun the same command "
+                     "to resume")
+    elif status.get("retryable"):
+        lines.append(f"{status['retryable']} shard(s) have failures a rerun may fix: rerun with --retry-failed")
+    lines += [f"dataset card:  datagen report {job}",
+              f"status:        datagen status {job}",
+              "read it:       python -c \"from datagen.io import read_job; "
+              f"t = read_job('{job}', only_success=True); print(t.num_rows, t.column_names[:4])\"",
+              f"   or pandas: pandas.read_parquet('{job / 'shards'}')"]
+    return "\n".join(lines)
 
 
 def _run(args) -> int:
@@ -63,11 +101,17 @@ def _run(args) -> int:
 
     try:
         status = run_job(_config(args), args.out, address=args.address, num_cpus=args.num_cpus,
-                         cache=args.cache, progress=not args.no_progress)
+                         cache=args.cache, progress=not args.no_progress, retry_failed=args.retry_failed)
     except JobError as exc:
         print(f"datagen run: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # running shards were abandoned with Ray's shutdown; their files are written atomically and
+        # only a ledger entry marks a shard finished, so a rerun redoes exactly the unfinished ones
+        print("\ndatagen run: interrupted; rerun the same command to resume", file=sys.stderr)
+        return 130
     print(format_status(status))
+    print(closing_summary(status))
     return 0 if status["complete"] else 1
 
 

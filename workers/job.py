@@ -9,12 +9,15 @@ Layout (names are the constants below; paths relative to the job directory)::
     failures/part-NNNNN.parquet  failed objects/stages of shard N (`failures` schema)
     failures.parquet          all failures (merged at the end of a run, and by `datagen status`)
     objects/<entry>/          processed objects the rows refer to (hard links into the cache)
+    failures/manifest.parquet objects of the source that the manifest cannot hold (stage `manifest`)
     ledger/part-NNNNN.json    written last for a finished shard: its counts and timings
+    progress/part-NNNNN.json  a running shard's progress (polled by the driver)
     .lock                     flock held by the running driver
     ray/                      Ray's temp dir when the path is short enough (else /tmp/dg-ray-*)
 
 A job is resumable: re-running the same config skips the shards with a ledger entry and redoes
-the others (their outputs are overwritten atomically). A different config is refused.
+the others (their outputs are overwritten atomically). A different config is refused; the
+execution settings (`EXECUTION_FIELDS`: object time limit, resources per shard) may change.
 """
 
 from __future__ import annotations
@@ -32,12 +35,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
 
+from datagen.synth.commands import FORCE_CLOSURE_SEEDS
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
 
-__all__ = ["FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions", "shard_slices"]
+__all__ = ["EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
+           "shard_slices"]
+
+
+PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running shard's progress
+MANIFEST_FAILURES = "manifest.parquet"  # failures/manifest.parquet: objects the manifest could not hold
 
 
 class JobError(RuntimeError):
@@ -51,9 +59,18 @@ FAST_PROCESS = {"coacd_threshold": 0.1, "coacd_preprocess_resolution": 30, "coac
                 "coacd_mcts_nodes": 10}
 
 
+# fields that say how a job runs, not what it produces: outside the config hash, so a resumed
+# job may change them (a longer object timeout, more CPUs per shard)
+EXECUTION_FIELDS = ("object_timeout_s", "cpus_per_shard", "gpus_per_shard")
+MAX_SEED = 2**62                        # shard k uses seed + k; int64 columns hold it
+MAX_GRASPS_PER_OBJECT = 10_000
+MAX_GRID_RESOLUTION = 256               # 256^3 float32 = 64 MiB per object
+
+
 @dataclass(frozen=True)
 class JobConfig:
-    """Everything that determines a job's rows. Hashed: any change is a different job."""
+    """Everything that determines a job's rows (hashed: any change is a different job), plus the
+    execution settings of `EXECUTION_FIELDS` (not hashed)."""
 
     source: str = "procedural"          #: object source URI (datagen.objects.sources)
     count: int = 6                      #: objects (SCALE)
@@ -61,40 +78,59 @@ class JobConfig:
                                         #: manifest's own scales are used as they are)
     test_fraction: float = 0.1          #: manifest split
     manifest: str = ""                  #: existing manifest file (its first `count` objects); "" = build
-    hand: str = "shadow"
+    hand: str = "shadow"                #: built-in hand name or hand spec YAML path
     tasks: tuple = ("force_closure",)   #: built-in task names or task YAML paths
-    grasps_per_object: int = 8          #: per object and scale
+    grasps_per_object: int = 8          #: per object and scale (1 to 10000)
     objects_per_shard: int = 2
-    seed: int = 0                       #: base seed; shard k synthesizes with seed + k
-    grid_resolution: int = 48           #: GraspTarget SDF grid nodes per axis (64: ~25 s/object on
-                                        #: one core, 48: ~10 s, 32: ~3 s); built once per object
-    object_timeout_s: float = 300.0     #: per-object processing limit (isolated process)
+    seed: int = 0                       #: base seed, 0 <= seed < 2**62; shard k synthesizes with seed + k
+    grid_resolution: int = 48           #: GraspTarget SDF grid nodes per axis, 8 to 256 (64: ~25 s/object
+                                        #: on one core, 48: ~10 s, 32: ~3 s); built once per object
+    object_timeout_s: float = 300.0     #: per-object processing limit (isolated process); not hashed
     process: dict = field(default_factory=lambda: dict(FAST_PROCESS))  #: ProcessConfig fields
-    synth: dict = field(default_factory=lambda: {"iters": 300})  #: SynthConfig fields
+    synth: dict = field(default_factory=lambda: {"iters": 300, "seeds_per_grasp": FORCE_CLOSURE_SEEDS})
+    #: SynthConfig fields (multi-start: the best of 8 starts per grasp; benchmarks/results/quality.md)
     eval: dict = field(default_factory=dict)  #: EvalConfig fields
     cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads
                                         #: (not hashed: keep it fixed within a job for identical floats)
     gpus_per_shard: float = 1.0         #: used only when the cluster has GPUs
 
     def __post_init__(self):
+        from datagen.objects.config import check_field_types
+
         def need(ok: bool, what: str):
             if not ok:
                 raise JobError(f"JobConfig.{what}")
 
+        if isinstance(self.tasks, str):
+            object.__setattr__(self, "tasks", (self.tasks,))
+        bad = check_field_types(self, "JobConfig")
+        if bad:
+            raise JobError(bad)
+        need(all(isinstance(s, (int, float)) and not isinstance(s, bool) for s in self.scales),
+             f"scales must be numbers (metres), got {self.scales!r}")
+        need(all(isinstance(t, str) and t for t in self.tasks), f"tasks must be names or paths, got {self.tasks!r}")
         object.__setattr__(self, "scales", tuple(float(s) for s in self.scales))
-        tasks = (self.tasks,) if isinstance(self.tasks, str) else tuple(str(t) for t in self.tasks)
-        object.__setattr__(self, "tasks", tasks)
-        need(isinstance(self.count, int) and self.count >= 1, f"count must be an int >= 1, got {self.count!r}")
-        need(bool(self.scales) and min(self.scales) > 0, f"scales must be positive metres, got {self.scales}")
+        object.__setattr__(self, "tasks", tuple(self.tasks))
+        need(self.count >= 1, f"count must be an int >= 1, got {self.count!r}")
+        need(bool(self.scales) and min(self.scales) > 0 and max(self.scales) < 10,
+             f"scales must be in (0, 10) metres, got {self.scales}")
+        need(len(set(self.scales)) == len(self.scales), f"scales must be distinct, got {self.scales}")
+        need(0 <= self.test_fraction <= 1, f"test_fraction must be in [0, 1], got {self.test_fraction}")
         need(bool(self.tasks), "tasks must name at least one task")
-        need(self.grasps_per_object >= 1, f"grasps_per_object must be >= 1, got {self.grasps_per_object}")
-        need(self.grid_resolution >= 8, f"grid_resolution must be >= 8, got {self.grid_resolution}")
+        need(len(set(self.tasks)) == len(self.tasks), f"tasks must be distinct, got {list(self.tasks)}")
+        need(bool(self.hand), "hand must name a hand")
+        need(1 <= self.grasps_per_object <= MAX_GRASPS_PER_OBJECT,
+             f"grasps_per_object must be in 1..{MAX_GRASPS_PER_OBJECT}, got {self.grasps_per_object}")
+        need(8 <= self.grid_resolution <= MAX_GRID_RESOLUTION,
+             f"grid_resolution must be in 8..{MAX_GRID_RESOLUTION}, got {self.grid_resolution}")
         need(self.objects_per_shard >= 1, f"objects_per_shard must be >= 1, got {self.objects_per_shard}")
+        need(0 <= self.seed < MAX_SEED, f"seed must be an int in [0, 2**62), got {self.seed}")
         need(self.object_timeout_s > 0, f"object_timeout_s must be > 0 seconds, got {self.object_timeout_s}")
         need(self.cpus_per_shard > 0 and self.gpus_per_shard >= 0, "cpus_per_shard must be > 0, gpus_per_shard >= 0")
-        for name in ("process", "synth", "eval"):
-            need(isinstance(getattr(self, name), dict), f"{name} must be a mapping of that config's fields")
-        self.build_configs()  # validates the nested configs now, not in a worker
+        try:
+            self.build_configs()  # validates the nested configs now, not in a worker
+        except (ValueError, TypeError) as exc:
+            raise JobError(f"JobConfig: {exc}") from None
 
     def build_configs(self):
         """(ProcessConfig, SynthConfig, EvalConfig) of this job."""
@@ -105,8 +141,55 @@ class JobConfig:
         return (ProcessConfig.from_dict(self.process), SynthConfig.from_dict(self.synth, where="job synth"),
                 EvalConfig.from_dict(self.eval))
 
+    def check_runnable(self) -> None:
+        """Refuse (JobError naming the value and the valid ones) a hand or task this machine
+        cannot load, before any work starts. Not part of construction: ``datagen status`` reads
+        job.json on machines that may lack a hand's asset package."""
+        from datagen.hands import BUILTIN_HANDS, available_hands
+        from datagen.synth.config import builtin_tasks, load_task
+
+        names = sorted(BUILTIN_HANDS)
+        if self.hand in BUILTIN_HANDS:
+            if self.hand not in available_hands():
+                raise JobError(f"hand {self.hand!r}: its asset package is not installed; run `make hands` "
+                               f"(installed hands: {available_hands()})")
+        elif Path(self.hand).suffix.lower() in (".yaml", ".yml") and Path(self.hand).is_file():
+            from datagen.hands.spec import load_spec
+
+            try:
+                load_spec(self.hand)
+            except Exception as exc:  # noqa: BLE001 - any spec problem refuses the job
+                raise JobError(f"hand spec {self.hand}: {exc}") from None
+        else:
+            raise JobError(f"unknown hand {self.hand!r}; valid hands: {', '.join(names)} "
+                           "(or the path of a hand spec YAML)")
+        from datagen.objects.errors import ObjectError
+        from datagen.objects.manifest import load_manifest
+        from datagen.objects.sources import canonical_source
+
+        try:
+            if self.manifest:
+                load_manifest(self.manifest)
+            else:
+                kind, _, root = canonical_source(self.source).partition(":")
+                if kind in ("dir", "dexgraspnet") and not Path(root).is_dir():
+                    raise JobError(f"source {self.source!r}: {root} is not a folder")
+        except ObjectError as exc:
+            raise JobError(str(exc)) from None
+        for t in self.tasks:
+            try:
+                load_task(t)
+            except Exception as exc:  # noqa: BLE001 - ConfigError, or a bad task YAML
+                first = " ".join(str(exc).split())
+                if Path(t).suffix:
+                    raise JobError(f"task {t!r}: {first}") from None
+                raise JobError(f"unknown task {t!r}; valid tasks: {', '.join(builtin_tasks())} "
+                               "(or the path of a task YAML)") from None
+
     @classmethod
     def from_dict(cls, data: dict | None, where: str = "job config") -> "JobConfig":
+        if data is not None and not isinstance(data, dict):
+            raise JobError(f"{where}: a job config must be a mapping of JobConfig fields, got {type(data).__name__}")
         data = dict(data or {})
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - known)
@@ -116,10 +199,12 @@ class JobConfig:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "JobConfig":
+        from datagen.objects.config import read_yaml
+
         try:
-            data = yaml.safe_load(Path(path).read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise JobError(f"{path}: cannot read the job config: {exc}") from None
+            data = read_yaml(path, "job config")
+        except ValueError as exc:
+            raise JobError(str(exc)) from None
         return cls.from_dict(data, where=str(path))
 
     def to_dict(self) -> dict[str, Any]:
@@ -127,11 +212,16 @@ class JobConfig:
         d["scales"], d["tasks"] = list(self.scales), list(self.tasks)
         return d
 
-    def hash(self) -> str:
-        """sha256 of the canonical JSON (resources excluded: they do not change rows)."""
+    def identity(self) -> dict[str, Any]:
+        """The hashed part of `to_dict` (execution settings removed)."""
         d = self.to_dict()
-        d.pop("cpus_per_shard"), d.pop("gpus_per_shard")
-        return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()
+        for k in EXECUTION_FIELDS:
+            d.pop(k)
+        return d
+
+    def hash(self) -> str:
+        """sha256 of the canonical JSON of `identity` (what decides the rows)."""
+        return hashlib.sha256(json.dumps(self.identity(), sort_keys=True, default=list).encode()).hexdigest()
 
 
 def code_version() -> str:
@@ -177,6 +267,13 @@ class JobDir:
 
     def shard_failures_path(self, index: int) -> Path:
         return self.path / FAILURES_DIR / f"{self.shard_name(index)}.parquet"
+
+    def progress_path(self, index: int) -> Path:
+        return self.path / PROGRESS_DIR / f"{self.shard_name(index)}.json"
+
+    @property
+    def manifest_failures_path(self) -> Path:
+        return self.path / FAILURES_DIR / MANIFEST_FAILURES
 
     def ledger_path(self, index: int) -> Path:
         return self.path / LEDGER_DIR / f"{self.shard_name(index)}.json"
@@ -234,10 +331,13 @@ class JobDir:
         p = self.path / JOB_JSON
         if p.is_file():
             old = json.loads(p.read_text())
+            if old.get("config_hash") != cfg.hash() and self._rehash(old) == cfg.hash():
+                # made before object_timeout_s left the hash: same rows, record the new hash
+                old["config_hash"] = cfg.hash()
+                atomic_write_text(p, json.dumps(old, indent=1, sort_keys=True))
             if old.get("config_hash") != cfg.hash():
-                new = cfg.to_dict()
-                diff = sorted(k for k in set(new) | set(old.get("config", {}))
-                              if new.get(k) != old.get("config", {}).get(k))
+                new, was = cfg.identity(), dict(old.get("config", {}))
+                diff = sorted(k for k in set(new) | set(was) if k not in EXECUTION_FIELDS and new.get(k) != was.get(k))
                 raise JobError(f"job directory {self.path} holds a different job (config hash "
                                f"{str(old.get('config_hash'))[:12]} != {cfg.hash()[:12]}; fields differing: {diff}); "
                                "re-run with the same settings to resume, or use another --out")
@@ -249,6 +349,13 @@ class JobDir:
                "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         atomic_write_text(p, json.dumps(doc, indent=1, sort_keys=True))
         return False
+
+    @staticmethod
+    def _rehash(doc: dict) -> str:
+        try:
+            return JobConfig.from_dict(doc.get("config")).hash()
+        except JobError:
+            return ""
 
     # ------------------------------------------------------------- shards
     def finished(self) -> dict[int, dict]:

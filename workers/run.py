@@ -12,7 +12,9 @@ node needs this package installed.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
+import re
 import shutil
 import sys
 import time
@@ -24,73 +26,142 @@ import pyarrow.parquet as pq
 from schemas import arrow_schema
 
 from .job import JobConfig, JobDir, JobError, code_version, package_versions, shard_slices
-from .shard import run_shard, write_table_atomic
+from .shard import _failure, run_shard, write_table_atomic
 
-__all__ = ["run_job", "prepare_manifest", "merge_failures", "MAX_RAY_TEMP_LEN"]
+__all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
+           "MAX_RAY_TEMP_LEN"]
 
 MAX_RAY_TEMP_LEN = 40
 TASK_RETRIES = 3  # a shard whose node dies is rerun elsewhere (shards are idempotent)
 
 
+# failure reasons decided by an object's bytes: cached with the object, so a retry cannot change
+# them; every other failure (timeout, crashed, error, missing_file, ...) is retried by
+# `run_job(retry_failed=True)`
+FINAL_REASONS = frozenset({"unreadable_mesh", "empty_mesh", "non_finite_vertices", "huge_coordinates", "too_many_faces",
+                           "degenerate_mesh", "coacd_failed", "coacd_no_parts", "surface_failed", "mjcf_failed"})
+
+
 def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
     """The job's manifest slice: read back when present (resume), else built or cut from
-    ``cfg.manifest`` and written atomically."""
+    ``cfg.manifest`` and written atomically. Objects of the source that cannot be manifest
+    entries become rows of ``failures/manifest.parquet`` (stage ``manifest``)."""
+    from datagen.objects.errors import ManifestError
     from datagen.objects.manifest import build_manifest, load_manifest, write_manifest
 
     if job.manifest_path.is_file():
-        return load_manifest(job.manifest_path)
+        try:
+            return load_manifest(job.manifest_path, check_paths=False)
+        except ManifestError as exc:
+            raise JobError(f"job {job.path}: its manifest no longer loads ({exc}); start the job in a new "
+                           "--out") from None
+    rejected = []
     if cfg.manifest:
         entries = load_manifest(cfg.manifest)[: cfg.count]
         if len(entries) < cfg.count:
             print(f"warning: manifest {cfg.manifest} has {len(entries)} objects, fewer than count {cfg.count}",
                   file=sys.stderr)
     else:
-        entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction)
+        entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction, rejected=rejected)
+    rows: list[dict] = []
+    for r in rejected:  # shard -1: before any shard
+        _failure(rows, -1, r.id, "manifest", r.reason, r.message)
+    write_table_atomic(pa.Table.from_pylist(rows, schema=arrow_schema("failures")), job.manifest_failures_path)
     if not entries:
-        raise JobError(f"job {job.path}: the manifest is empty (source {cfg.source!r}, manifest {cfg.manifest!r})")
+        raise JobError(f"job {job.path}: the manifest is empty (source {cfg.source!r}, manifest {cfg.manifest!r})"
+                       + "".join(f"\n  {r.message}" for r in rejected[:5]))
     write_manifest(entries, job.manifest_path)
     return entries
 
 
 def merge_failures(job: JobDir) -> pa.Table:
-    """Concatenate the shards' failure files into ``failures.parquet`` (atomically)."""
+    """Concatenate the manifest's and the shards' failure files into ``failures.parquet``
+    (atomically)."""
     schema = arrow_schema("failures")
-    parts = [pq.read_table(p) for p in sorted((job.path / "failures").glob("part-*.parquet"))]
+    files = ([job.manifest_failures_path] if job.manifest_failures_path.is_file() else [])
+    files += sorted((job.path / "failures").glob("part-*.parquet"))
+    parts = [pq.read_table(p) for p in files]
     table = pa.concat_tables([p.cast(schema) for p in parts]) if parts else schema.empty_table()
     write_table_atomic(table, job.failures_path)
     return table
+
+
+def retryable_shards(job: JobDir, done: dict) -> list[int]:
+    """Finished shards with a failure a rerun may fix (any reason outside `FINAL_REASONS`)."""
+    out = []
+    for i in sorted(done):
+        fp = job.shard_failures_path(i)
+        if fp.is_file() and any(r not in FINAL_REASONS for r in pq.read_table(fp, columns=["reason"])["reason"]
+                                .to_pylist()):
+            out.append(i)
+    return out
+
+
+def error_line(exc: BaseException) -> str:
+    """One line naming an exception from a Ray task: its cause, without traceback or colours."""
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, BaseException):
+        exc = cause
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc))
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return f"{type(exc).__name__}: {lines[-1] if lines else ''}"
 
 
 def _ray_temp_dir(job: JobDir) -> tuple[str, bool]:
     """(temp dir, is_private_tmp)."""
     inside = job.path / "ray"
     if len(str(inside)) <= MAX_RAY_TEMP_LEN:
-        inside.mkdir(parents=True, exist_ok=True)
+        inside.mkdir(mode=0o700, parents=True, exist_ok=True)
+        os.chmod(inside, 0o700)
         return str(inside), False
     # a name fixed by the job path: a resumed run reuses (and finally removes) a killed run's dir
     short = Path("/tmp") / f"dg-ray-{hashlib.sha256(str(job.path).encode()).hexdigest()[:10]}"
-    short.mkdir(exist_ok=True)
+    short.mkdir(mode=0o700, exist_ok=True)
+    if short.owner() != __import__("getpass").getuser():
+        raise JobError(f"{short} (Ray's temp dir for this job) belongs to another user; remove it")
+    os.chmod(short, 0o700)
     return str(short), True
 
 
 def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_cpus: int | None = None,
-            cache: str | None = None, progress: bool = True, log=print) -> dict:
-    """Run (or resume) the job in directory ``out``; returns `workers.status.job_status`."""
+            cache: str | None = None, progress: bool = True, retry_failed: bool = False, log=print) -> dict:
+    """Run (or resume) the job in directory ``out``; returns `workers.status.job_status`.
+
+    The hand and tasks are checked first (`JobConfig.check_runnable`), so a job that cannot run
+    leaves nothing behind. ``retry_failed`` also reruns finished shards whose failures a rerun
+    may fix (`retryable_shards`: a timeout, a crash, an unwritable cache, a file restored)."""
     import ray
 
     from .status import job_status
 
+    cfg.check_runnable()
     job = JobDir(out)
-    job.lock()
+    _check_out(job.path)
+    _check_cache(cache)
+    existed = job.path.exists()
+    try:
+        job.lock()
+    except OSError as exc:
+        raise JobError(f"--out {job.path}: cannot create the job directory: {exc.strerror}") from None
     try:
         resumed = job.init(cfg)
         doc = job.read_job()
-        entries = prepare_manifest(job, cfg)
+        try:
+            entries = prepare_manifest(job, cfg)
+        except Exception:
+            if not resumed:  # leave no half job behind to refuse the corrected command
+                _discard_new_job(job, remove_dir=not existed)
+            raise
         slices = shard_slices(len(entries), cfg.objects_per_shard)
         done = job.finished()
+        retry = retryable_shards(job, done) if retry_failed else []
+        for i in retry:  # unfinished until rerun: readers never see old and new files mixed
+            job.ledger_path(i).unlink(missing_ok=True)
+            done.pop(i)
         todo = [i for i in range(len(slices)) if i not in done]
         log(f"job {job.path}: {len(entries)} objects in {len(slices)} shards; "
-            f"{'resuming, ' if resumed else ''}{len(done)} done, {len(todo)} to run")
+            f"{'resuming, ' if resumed else ''}{len(done)} done, {len(todo)} to run"
+            + (f" ({len(retry)} retried for failures)" if retry_failed else ""))
         code = code_version()
         if code != doc["code_version"]:
             log(f"warning: the code changed since this job was created ({doc['code_version']} -> {code}); "
@@ -108,10 +179,68 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         job.unlock()
 
 
+def _discard_new_job(job: JobDir, remove_dir: bool) -> None:
+    """Remove what `JobDir.init` and `prepare_manifest` wrote for a job that never started."""
+    from datagen.io.layout import FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, OBJECTS_DIR, SHARDS_DIR
+
+    for f in (job.path / JOB_JSON, job.manifest_failures_path, job.manifest_path):
+        f.unlink(missing_ok=True)
+    for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
+        try:
+            (job.path / d).rmdir()
+        except OSError:
+            pass
+    if remove_dir:
+        (job.path / LOCK).unlink(missing_ok=True)
+        try:
+            job.path.rmdir()
+        except OSError:
+            pass
+
+
+def _check_out(path: Path) -> None:
+    """A usable job directory: not a file, and writable (JobError naming the problem)."""
+    if path.exists() and not path.is_dir():
+        raise JobError(f"--out {path} is an existing file, not a job directory; choose another --out")
+    probe = path
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+        raise JobError(f"--out {path}: cannot write in {probe} (permission denied); choose another --out")
+
+
+def _check_cache(cache: str | None) -> None:
+    """The objects cache root exists or can be made, and is writable (JobError otherwise)."""
+    from datagen.objects.cache import cache_root
+
+    root = cache_root(cache or os.environ.get("DATAGEN_CACHE") or None)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise JobError(f"objects cache {root}: cannot create it ({exc.strerror}); set --cache or "
+                       "$DATAGEN_CACHE to a writable folder") from None
+    if not os.access(root, os.W_OK | os.X_OK):
+        raise JobError(f"objects cache {root} is not writable; set --cache or $DATAGEN_CACHE to a writable folder")
+
+
+def _progress_units(job: JobDir, slices, running) -> float:
+    """Objects' worth of work done by the running shards (from their progress files)."""
+    total = 0.0
+    for i in running:
+        try:
+            p = json.loads(job.progress_path(i).read_text())
+            total += (slices[i][1] - slices[i][0]) * min(1.0, float(p["done"]) / max(float(p["total"]), 1e-9))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return total
+
+
 def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_cpus, progress, log) -> dict:
     address = address or os.environ.get("RAY_ADDRESS") or None
     private_tmp = None
     started = False
+    for i in todo:  # a killed run's progress is stale
+        job.progress_path(i).unlink(missing_ok=True)
     if not ray.is_initialized():
         if address:
             ray.init(address=address, log_to_driver=False)
@@ -122,6 +251,7 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
                 log(f"ray temp dir {tmp} (the job path is too long for Ray's Unix sockets)")
             ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
                      log_to_driver=False, configure_logging=False)
+            os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
         started = True
     try:
         gpus = cfg.gpus_per_shard if ray.cluster_resources().get("GPU", 0) > 0 else 0
@@ -134,26 +264,32 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
             shard_entries = [{**e.__dict__, "scales": list(e.scales)} for e in entries[a:b]]
             refs[task.remote(str(job.path), i, shard_entries, cfg_d, provenance)] = i
         bar = None
+        finished_objects = float(len(entries) - sum(slices[i][1] - slices[i][0] for i in todo))
         if progress:
             from tqdm import tqdm
-            bar = tqdm(total=len(slices), initial=len(slices) - len(todo), desc="shards", unit="shard",
-                       file=sys.stderr)
+            bar = tqdm(total=len(entries), initial=finished_objects, desc="objects", unit="obj", file=sys.stderr,
+                       smoothing=0.05, bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} "
+                                                  "[{elapsed}<{remaining}{postfix}]")
         grasps = ok = 0
         errors: dict[int, str] = {}
         pending = list(refs)
         t0 = time.perf_counter()
         while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            i = refs[ready[0]]
-            try:
-                s = ray.get(ready[0])
-                grasps, ok = grasps + s["grasps"], ok + s["success"]
-            except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
-                errors[i] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-                log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
+            ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
+            for ref in ready:
+                i = refs[ref]
+                try:
+                    s = ray.get(ref)
+                    grasps, ok = grasps + s["grasps"], ok + s["success"]
+                except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
+                    errors[i] = error_line(exc)
+                    log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
+                finished_objects += slices[i][1] - slices[i][0]
             if bar is not None:
-                bar.update(1)
-                bar.set_postfix(grasps=grasps, success=f"{ok / max(grasps, 1):.0%}")
+                running = [refs[r] for r in pending]
+                bar.update(finished_objects + _progress_units(job, slices, running) - bar.n)
+                bar.set_postfix(shards=f"{len(refs) - len(pending)}/{len(refs)}", grasps=grasps,
+                                success=f"{ok / max(grasps, 1):.0%}", refresh=False)
         if bar is not None:
             bar.close()
         log(f"ran {len(todo)} shards in {time.perf_counter() - t0:.1f} s")

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import multiprocessing as mp
 import os
+import pickle
 import shutil
 import socket
 import time
@@ -36,27 +37,54 @@ def shard_seed(cfg: JobConfig, index: int) -> int:
 
 
 def _process_child(conn, source, path, object_id, family, pcfg_dict, cache, sha) -> None:
-    from datagen.objects.config import ProcessConfig
-    from datagen.objects.process import process_object
-    from datagen.objects.sources import resolve
+    """Process one object; always sends (status, reason, message, entry) unless the process dies."""
+    try:
+        from datagen.objects.config import ProcessConfig
+        from datagen.objects.errors import ObjectError
+        from datagen.objects.process import process_object
+        from datagen.objects.sources import resolve
 
-    ref = resolve(source, path, object_id, family)
-    p = process_object(ref, ProcessConfig.from_dict(pcfg_dict), root=cache, expected_sha256=sha)
-    conn.send((p.status, p.reason, p.message, str(p.entry) if p.entry else ""))
+        try:
+            ref = resolve(source, path, object_id, family)
+            p = process_object(ref, ProcessConfig.from_dict(pcfg_dict), root=cache, expected_sha256=sha)
+            msg = (p.status, p.reason, p.message, str(p.entry) if p.entry else "")
+        except ObjectError as exc:
+            msg = ("failed", exc.reason.value, str(exc), "")
+    except Exception as exc:  # noqa: BLE001 - e.g. an unwritable cache: a cause, not a crash
+        msg = ("failed", "error", f"{object_id}: {type(exc).__name__}: {exc}", "")
+    conn.send(msg)
     conn.close()
 
 
 def process_isolated(entry, pcfg, cache: str | None, timeout_s: float):
-    """``(ProcessedObject or None, reason, message)``: the cached entry if present, else processed
-    in a fresh process killed after ``timeout_s`` (reason ``timeout``) or if it dies (``crashed``)."""
-    from datagen.objects.cache import cache_root, entry_dir
-    from datagen.objects.layout import META
-    from datagen.objects.process import load_processed
+    """``(ProcessedObject or None, reason, message)`` of a manifest entry.
 
-    final = entry_dir(cache_root(cache), entry.sha256, pcfg.hash())
-    if (final / META).is_file():
-        p = load_processed(final)
-        return (p, "", "") if p.ok else (None, p.reason, p.message)
+    The file is read and hashed here first: a missing file (``missing_file``), one that is not
+    a regular file inside the source root, or one whose bytes are not the manifest's sha256
+    (``sha256_mismatch``) is a failure, never a cache hit under the manifest's hash. Then the
+    cache entry of those bytes (`datagen.objects.process.cached`, labelled with this entry's id)
+    if present, else a fresh process killed after ``timeout_s`` (reason ``timeout``) or if it
+    dies (``crashed``)."""
+    import hashlib
+
+    from datagen.objects.cache import cache_root
+    from datagen.objects.errors import ObjectError, Reason
+    from datagen.objects.process import as_object, cached, load_processed
+
+    try:
+        ref = entry.ref()
+        sha = hashlib.sha256(ref.read_bytes()).hexdigest()
+        if sha != entry.sha256:
+            return None, Reason.SHA_MISMATCH.value, (f"{entry.id}: {Reason.SHA_MISMATCH.value}: file sha256 "
+                                                     f"{sha[:12]}... != manifest {entry.sha256[:12]}...; the file "
+                                                     "changed since the manifest was built: rebuild it")
+        hit = cached(ref, sha, pcfg, cache)
+    except ObjectError as exc:
+        return None, exc.reason.value, str(exc)
+    except OSError as exc:
+        return None, "error", f"{entry.id}: {type(exc).__name__}: {exc}"
+    if hit is not None:
+        return (hit, "", "") if hit.ok else (None, hit.reason, hit.message)
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_process_child, args=(child, entry.source, entry.path, entry.id, entry.family,
@@ -66,7 +94,8 @@ def process_isolated(entry, pcfg, cache: str | None, timeout_s: float):
     child.close()
     try:
         if not parent.poll(timeout_s):
-            return None, "timeout", f"{entry.id}: processing exceeded {timeout_s:g} s and was killed"
+            return None, "timeout", (f"{entry.id}: processing exceeded {timeout_s:g} s and was killed (raise "
+                                     "object_timeout_s and rerun with --retry-failed)")
         try:
             status, reason, message, path = parent.recv()
         except EOFError:
@@ -79,7 +108,7 @@ def process_isolated(entry, pcfg, cache: str | None, timeout_s: float):
         parent.close()
     if status != "ok":
         return None, reason, message
-    return load_processed(Path(path)), "", ""
+    return as_object(load_processed(Path(path)), ref), "", ""
 
 
 def _link_into_job(processed, job: JobDir) -> str:
@@ -147,7 +176,28 @@ def task_targets(task, targets: list) -> list:
 def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     """Run shard ``index`` over manifest ``entries`` (dicts of ManifestEntry fields) and write
     its shard, failures and ledger entry. Returns the ledger summary. Idempotent: a rerun
-    overwrites the same files with the same rows."""
+    overwrites the same files with the same rows. An exception that cannot be pickled (Ray
+    would report it as ``UnserializableException``, losing its cause) is raised as a
+    RuntimeError carrying its type and message."""
+    cache, before = provenance.get("cache") or None, os.environ.get("DATAGEN_CACHE")
+    if cache:  # the hand cache (flattened MJCFs) follows the objects cache, for this shard only
+        os.environ["DATAGEN_CACHE"] = cache
+    try:
+        return _run_shard(job_path, index, entries, cfg_dict, provenance)
+    except Exception as exc:
+        try:
+            pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001
+            raise RuntimeError(f"shard {index}: {type(exc).__name__}: {exc}") from None
+        raise
+    finally:
+        if before is None:
+            os.environ.pop("DATAGEN_CACHE", None)
+        else:
+            os.environ["DATAGEN_CACHE"] = before
+
+
+def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     import torch
 
     from datagen.objects.manifest import ManifestEntry
@@ -164,6 +214,8 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
     torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
+    n_targets = sum(len(d["scales"]) for d in entries)
+    progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets)
     timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
     fails: list[dict] = []
     tables: list[pa.Table] = []
@@ -182,6 +234,8 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             ready.append((e, load_processed(job.path / rel), rel))
         except Exception as exc:  # noqa: BLE001 - recorded, never fatal
             _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
+        finally:
+            progress.add(1)
     timings["process_s"] = time.perf_counter() - t0
 
     # 2. synthesis targets
@@ -194,15 +248,22 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         except Exception as exc:  # noqa: BLE001
             _failure(fails, index, e.id, "target", "error", f"{e.id}: {type(exc).__name__}: {exc}")
             continue
+        finally:
+            progress.add(1)
         for s in e.scales:  # the manifest's scales (a built manifest has the config's)
-            t = dataclasses.replace(base, scale=float(s), hull_points=base.hull_points * (s / base.scale),
-                                    object_path=rel)
+            # the id is the manifest's: the processed object may be a cache entry made for
+            # another object with the same bytes (its meta names that one)
+            t = dataclasses.replace(base, object_id=e.id, scale=float(s),
+                                    hull_points=base.hull_points * (s / base.scale), object_path=rel,
+                                    mesh_sha256=e.sha256)
             targets.append(t.to(device) if device != "cpu" else t)
     timings["target_s"] = time.perf_counter() - t0
+    progress.set(2 * len(entries))
 
     hand = _hand(cfg.hand, device) if targets else None
     all_targets = targets
-    for task_name in cfg.tasks:
+    for k, task_name in enumerate(cfg.tasks):
+        progress.set(2 * len(entries) + 2 * k * n_targets)
         task = load_task(task_name)
         targets = task_targets(task, all_targets)
         if not targets:
@@ -211,7 +272,12 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         t0 = time.perf_counter()
         try:
             scfg_k = dataclasses.replace(scfg, seed=shard_seed(cfg, index))
-            result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object)
+            base_units = progress.done
+
+            def moved(it, *_):  # progress per optimizer iteration (reads nothing of the state)
+                progress.set(base_units + n_targets * (it + 1) / max(scfg_k.iters, 1))
+
+            result = synthesize(hand, targets, task, scfg_k, cfg.grasps_per_object, callback=moved)
             table = result_table(result, targets, hand, task, scfg_k, splits={e.id: e.split for e, _, _ in ready})
         except Exception as exc:  # noqa: BLE001
             for t in targets:
@@ -220,9 +286,11 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             timings["synth_s"] += time.perf_counter() - t0
             continue
         timings["synth_s"] += time.perf_counter() - t0
+        progress.set(base_units + n_targets)
         # 4. MuJoCo evaluation, per object so one bad object costs only its rows
         t0 = time.perf_counter()
         for t in targets:
+            progress.add(n_targets / len(targets))
             mask = pc.and_(pc.equal(table["object_id"], t.object_id),
                                    pc.equal(table["object_scale_m"], pa.scalar(t.scale, pa.float32())))
             part = table.filter(mask)
@@ -244,7 +312,9 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
         "datagen.config_hash": cfg.hash(), "datagen.packages": provenance["packages"],
         "datagen.host": socket.gethostname(), "datagen.job_created_at": provenance["created_at"],
         "datagen.written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "datagen.shard": str(index), "datagen.synth_config": scfg.to_dict(), "datagen.eval_config": ecfg.to_dict(),
+        "datagen.shard": str(index), "datagen.seed": str(shard_seed(cfg, index)),
+        "datagen.synth_config": dataclasses.replace(scfg, seed=shard_seed(cfg, index)).to_dict(),
+        "datagen.eval_config": ecfg.to_dict(),
         "datagen.process_config": pcfg.to_dict()}.items()})
     schema = schema.with_metadata(meta)
     if tables:
@@ -263,4 +333,36 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
                "wall_s": round(time.perf_counter() - t_start, 3),
                "cpu_s": round(time.process_time() - cpu_start, 3)}  # this process (not the CoACD children)
     job.record_finished(index, summary)
+    progress.set(progress.total)
     return summary
+
+
+class ShardProgress:
+    """A running shard's progress, ``{"done": units, "total": units}`` in a small JSON file the
+    driver polls (written atomically, at most every 0.5 s). Units: one per object processed and
+    one per object whose target is built; then per task, as many for the synthesis of the batch
+    (moving with its iterations) and as many again for its evaluation as the shard has objects x
+    scales. A rough but steady measure of work: synthesis and evaluation dominate a shard."""
+
+    def __init__(self, path: Path, total: float):
+        self.path, self.total, self.done, self._last = path, float(total), 0.0, 0.0
+        self._write(force=True)
+
+    def add(self, n: float) -> None:
+        self.set(self.done + n)
+
+    def set(self, done: float) -> None:
+        self.done = min(float(done), self.total)
+        self._write(force=self.done >= self.total)
+
+    def _write(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last < 0.5:
+            return
+        self._last = now
+        try:
+            from .job import atomic_write_text
+
+            atomic_write_text(self.path, json.dumps({"done": round(self.done, 3), "total": self.total}))
+        except OSError:  # progress is a convenience: never fail a shard for it
+            pass

@@ -1,4 +1,6 @@
-"""What a job directory holds: shards done/total, grasps, success rate, failures by reason."""
+"""What a job directory holds: shards done/total, grasps, success rate, failures by reason.
+
+Stage names (in failures and timings) are those of a shard's pipeline, `STAGES`."""
 
 from __future__ import annotations
 
@@ -9,7 +11,17 @@ import pyarrow.parquet as pq
 
 from .job import JobDir, shard_slices
 
-__all__ = ["job_status", "format_status"]
+__all__ = ["STAGES", "job_status", "format_status"]
+
+# stage -> what it does (a failure's `stage` column and the timings use these names)
+STAGES = {
+    "manifest": "enumerating the source: the object could not be a manifest entry",
+    "process": "mesh checks, repair, normalization and CoACD convex decomposition (cached per mesh)",
+    "target": "the synthesis target: signed-distance grid and hull samples of the object",
+    "synth": "grasp synthesis (the wrench-space optimization), one batch per shard and task",
+    "eval": "MuJoCo hold test of every grasp",
+    "write": "writing the Parquet shard, its failures and ledger entry",
+}
 
 
 def job_status(path: str | Path) -> dict:
@@ -18,13 +30,19 @@ def job_status(path: str | Path) -> dict:
 
     job = JobDir(path)
     cfg = job.config()
-    n_objects = len(load_manifest(job.manifest_path)) if job.manifest_path.is_file() else cfg.count
+    n_objects = len(load_manifest(job.manifest_path, check_paths=False)) if job.manifest_path.is_file() else cfg.count
     total = len(shard_slices(n_objects, cfg.objects_per_shard))
     done = job.finished()
     grasps = success = 0
     reasons: Counter = Counter()
     failures: Counter = Counter()
     stage_s: Counter = Counter()
+    if job.manifest_failures_path.is_file():
+        f = pq.read_table(job.manifest_failures_path, columns=["stage", "reason"])
+        failures.update(f"{s}:{r}" for s, r in zip(f["stage"].to_pylist(), f["reason"].to_pylist()))
+    from .run import retryable_shards
+
+    retryable = len(retryable_shards(job, done))
     for i, entry in done.items():
         p = job.shard_path(i)
         if p.is_file():
@@ -42,7 +60,7 @@ def job_status(path: str | Path) -> dict:
             "shards_total": total, "shards_done": len(done), "grasps": grasps, "success": success,
             "success_rate": success / grasps if grasps else 0.0, "eval_reasons": dict(reasons.most_common()),
             "failures": dict(failures.most_common()), "stage_seconds": {k: round(v, 2) for k, v in stage_s.items()},
-            "complete": len(done) == total}
+            "retryable": retryable, "complete": len(done) == total}
 
 
 def format_status(s: dict) -> str:
@@ -54,9 +72,15 @@ def format_status(s: dict) -> str:
     if s["eval_reasons"]:
         lines.append("  grasp outcomes: " + ", ".join(f"{k} {v}" for k, v in s["eval_reasons"].items()))
     lines.append("  failures: " + (", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "none"))
+    if s.get("retryable"):
+        lines.append(f"  {s['retryable']} shard(s) have failures a rerun may fix: rerun with --retry-failed")
     if s["stage_seconds"]:
         lines.append("  worker seconds by stage: " + ", ".join(f"{k[:-2]} {v:.1f}" for k, v in
                                                                s["stage_seconds"].items()))
+    used = {k.split(":")[0] for k in s["failures"]} | {k[:-2] for k in s["stage_seconds"]}
+    legend = [f"{k} = {v}" for k, v in STAGES.items() if k in used]
+    if legend:
+        lines.append("  stages: " + "; ".join(legend))
     if s.get("shard_errors"):
         lines.append("  shard errors: " + "; ".join(f"{k}: {v}" for k, v in s["shard_errors"].items()))
     return "\n".join(lines)

@@ -186,4 +186,11 @@ def append_results(table: pa.Table, results: list[GraspResult]) -> pa.Table:
             table = table.append_column(name, col)
     meta = dict(table.schema.metadata or {})
     meta[b"datagen.eval_schema_version"] = str(EVAL_SCHEMA_VERSION).encode()
+    if meta.get(b"datagen.schema") == b"grasps":  # no longer a grasps table: relabel it (or unlabel it)
+        from schemas import columns, declaration
+
+        meta.pop(b"datagen.schema"), meta.pop(b"datagen.schema_version", None)
+        if table.column_names == [c["name"] for c in columns("evaluated")]:
+            meta[b"datagen.schema"] = b"evaluated"
+            meta[b"datagen.schema_version"] = str(declaration("evaluated")["version"]).encode()
     return table.replace_schema_metadata(meta)

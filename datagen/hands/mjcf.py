@@ -33,8 +33,11 @@ __all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator
 
 
 def cache_dir() -> Path:
-    """Directory for flattened hand MJCFs: ``$DATAGEN_CACHE_DIR/hands`` or ``~/.cache/datagen/hands``."""
-    root = os.environ.get("DATAGEN_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "datagen")
+    """Directory for flattened hand MJCFs: ``hands/`` under the objects cache root (``$DATAGEN_CACHE``,
+    which ``datagen run --cache`` sets in its workers; else the older ``$DATAGEN_CACHE_DIR``; else
+    ``~/.cache/datagen``)."""
+    root = (os.environ.get("DATAGEN_CACHE") or os.environ.get("DATAGEN_CACHE_DIR")
+            or os.path.join(os.path.expanduser("~"), ".cache", "datagen"))
     return Path(root) / "hands"
 
 

@@ -43,9 +43,10 @@ def open_dataset(job_dir: str | Path) -> ds.Dataset:
     paths = shard_paths(job_dir)
     if not paths:
         raise FileNotFoundError(f"{job_dir}: no grasp rows yet (no finished shard with rows)")
-    schema = pq.read_schema(paths[0])
-    check_version(schema, "evaluated", where=str(paths[0]))
-    return ds.dataset([str(p) for p in paths], format="parquet", schema=schema)
+    schemas = [pq.read_schema(p) for p in paths]  # footers only: cheap, and every shard is checked
+    for p, sch in zip(paths, schemas):
+        check_version(sch, "evaluated", where=str(p))
+    return ds.dataset([str(p) for p in paths], format="parquet", schema=schemas[0])
 
 
 def read_job(job_dir: str | Path, columns: list[str] | None = None, only_success: bool = False) -> pa.Table:

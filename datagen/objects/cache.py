@@ -1,6 +1,7 @@
 """Content-addressed, atomically written cache of processed objects.
 
-Layout: ``<root>/objects/<sha[:2]>/<mesh sha256>-<config hash[:16]>/`` (see ``layout.py`` for the
+Layout: ``<root>/objects/<key[:2]>/<key>-<config hash[:16]>/``, the key being
+``process.object_key`` (the raw mesh sha256 with the file type and any existing pieces) (see ``layout.py`` for the
 files inside). An entry is built in ``<root>/tmp/<random>/`` and renamed into place in one
 ``os.rename``; a process killed mid-way leaves only a temp dir (removed by
 ``clean_stale_temp``), never a half entry. The root is ``$DATAGEN_CACHE`` or
@@ -27,12 +28,12 @@ def cache_root(root: str | Path | None = None) -> Path:
     return Path(env) if env else Path.home() / ".cache" / "datagen"
 
 
-def entry_dir(root: Path, mesh_sha256: str, config_hash: str) -> Path:
-    """Directory of the entry keyed by (mesh sha256, processing config hash)."""
-    if len(mesh_sha256) != 64 or len(config_hash) < 16:
-        raise ValueError(f"cache key needs a 64-hex mesh sha256 and a config hash, "
-                         f"got {mesh_sha256!r}, {config_hash!r}")
-    return root / "objects" / mesh_sha256[:2] / f"{mesh_sha256}-{config_hash[:16]}"
+def entry_dir(root: Path, object_key: str, config_hash: str) -> Path:
+    """Directory of the entry keyed by (object key, processing config hash)."""
+    if len(object_key) != 64 or len(config_hash) < 16:
+        raise ValueError(f"cache key needs a 64-hex object key and a config hash, "
+                         f"got {object_key!r}, {config_hash!r}")
+    return root / "objects" / object_key[:2] / f"{object_key}-{config_hash[:16]}"
 
 
 @contextlib.contextmanager

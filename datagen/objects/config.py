@@ -17,10 +17,76 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["ProcessConfig", "PROCESS_VERSION"]
+__all__ = ["ProcessConfig", "PROCESS_VERSION", "read_yaml", "check_field_types"]
 
 # Bump when the pipeline's output changes for the same config: it invalidates cache entries.
 PROCESS_VERSION = 1
+
+
+MAX_YAML_BYTES = 1 << 20  # a config is a few hundred bytes; refuse anything over 1 MiB
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """SafeLoader without aliases: ``*ref`` can expand a few hundred bytes into gigabytes."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not allowed in a config",
+                                              mark)
+        return super().compose_node(parent, index)
+
+
+def read_yaml(path: str | Path, what: str = "config"):
+    """The YAML document at ``path`` as plain data (mappings, lists, scalars). Raises ValueError
+    naming the file and the reason for a missing or unreadable file, a file over 1 MiB, invalid
+    YAML, language tags (``!!python/...``) and aliases."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_YAML_BYTES:
+            raise ValueError(f"{path}: the {what} is larger than {MAX_YAML_BYTES} bytes")
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ValueError(f"{path}: the {what} file does not exist") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: the {what} is not UTF-8 text") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the {what}: {exc.strerror}") from None
+    try:
+        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        detail = " ".join(str(exc).split())
+        raise ValueError(f"{path}: the {what} is not plain YAML data: {detail}") from None
+    except RecursionError:
+        raise ValueError(f"{path}: the {what} is nested too deeply") from None
+
+
+def _type_name(default) -> str:
+    return {bool: "true/false", int: "an integer", float: "a number", str: "a string", tuple: "a list",
+            list: "a list", dict: "a mapping"}[type(default)]
+
+
+def check_field_types(obj, where: str) -> str | None:
+    """The first field of dataclass ``obj`` whose value is not of its default's type (an int is
+    a number; a bool is neither), as a message naming it, or None."""
+    for f in dataclasses.fields(obj):
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            continue
+        v = getattr(obj, f.name)
+        t = type(default)
+        if t not in (bool, int, float, str, tuple, list, dict):
+            continue
+        ok = (isinstance(v, bool) if t is bool else
+              isinstance(v, int) and not isinstance(v, bool) if t is int else
+              isinstance(v, (int, float)) and not isinstance(v, bool) if t is float else
+              isinstance(v, (tuple, list)) if t in (tuple, list) else isinstance(v, t))
+        if not ok:
+            return f"{where}.{f.name} must be {_type_name(default)}, got {v!r}"
+    return None
 
 
 @dataclass(frozen=True)
@@ -57,6 +123,9 @@ class ProcessConfig:
             if not ok:
                 raise ValueError(f"ProcessConfig.{what}")
 
+        bad = check_field_types(self, "ProcessConfig")
+        if bad:
+            raise ValueError(bad)
         need(self.max_faces > 0, f"max_faces must be > 0, got {self.max_faces}")
         need(self.max_abs_coordinate_raw > 0, "max_abs_coordinate_raw must be > 0")
         need(0 <= self.min_volume_fraction < 1, "min_volume_fraction must be in [0, 1)")
@@ -79,6 +148,8 @@ class ProcessConfig:
     @classmethod
     def from_dict(cls, data: dict) -> "ProcessConfig":
         """Build from a plain dict; unknown keys are an error naming them."""
+        if not isinstance(data, dict):
+            raise ValueError(f"a processing config must be a mapping of ProcessConfig fields, got {data!r}")
         names = {f.name for f in dataclasses.fields(cls)} - {"extra"}
         unknown = {k: v for k, v in data.items() if k not in names}
         return cls(**{k: v for k, v in data.items() if k in names}, extra=unknown)
@@ -86,7 +157,7 @@ class ProcessConfig:
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ProcessConfig":
         """Load from a YAML mapping (an empty file gives the defaults)."""
-        data = yaml.safe_load(Path(path).read_text()) or {}
+        data = read_yaml(path, "processing config") or {}
         if not isinstance(data, dict):
             raise ValueError(f"{path}: a processing config must be a YAML mapping")
         return cls.from_dict(data)

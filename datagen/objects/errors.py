@@ -19,6 +19,7 @@ class Reason(str, enum.Enum):
     """Stable reason codes recorded for failed objects and rejected manifests."""
 
     MISSING_FILE = "missing_file"            # the mesh file does not exist
+    NOT_A_FILE = "not_a_regular_file"        # a directory, device, FIFO or looping symlink
     UNREADABLE_MESH = "unreadable_mesh"      # the file is not a mesh the loader understands
     EMPTY_MESH = "empty_mesh"                # no vertices or no faces
     NON_FINITE = "non_finite_vertices"       # NaN or inf coordinates
@@ -50,6 +51,9 @@ class ObjectError(DatagenError):
         self.thing = thing
         self.detail = detail
         super().__init__(f"{thing}: {self.reason.value}: {detail}")
+
+    def __reduce__(self):  # picklable (Ray ships exceptions between processes)
+        return self.__class__, (self.reason, self.thing, self.detail)
 
 
 class MeshProcessingError(ObjectError):

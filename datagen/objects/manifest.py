@@ -15,16 +15,17 @@ import hashlib
 import json
 import os
 import re
+import sys
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable
 
-from .errors import ManifestError, MeshProcessingError, Reason, SourceError
+from .errors import ManifestError, ObjectError, Reason, SourceError
 from . import task_objects
-from .sources import ObjectRef, iter_source, resolve
+from .sources import ObjectRef, canonical_source, iter_source, resolve
 
-__all__ = ["DEFAULT_SCALES", "ManifestEntry", "split_of", "build_manifest", "write_manifest",
+__all__ = ["DEFAULT_SCALES", "ManifestEntry", "Rejected", "split_of", "build_manifest", "write_manifest",
            "load_manifest"]
 
 DEFAULT_SCALES = (0.06, 0.08, 0.10, 0.12)
@@ -62,31 +63,61 @@ def split_of(object_id: str, test_fraction: float = 0.1) -> str:
     return "test" if h < test_fraction else "train"
 
 
+@dataclass(frozen=True)
+class Rejected:
+    """An enumerated object the manifest cannot hold: its id, path, reason code and message."""
+
+    id: str
+    path: str
+    reason: str
+    message: str
+
+
 def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEFAULT_SCALES,
-                   test_fraction: float = 0.1, progress: bool = False) -> list[ManifestEntry]:
-    """Enumerate a source and hash each raw mesh. Objects whose file cannot be read are skipped
-    with a warning on stderr (processing records every other failure). Objects of the ``tasks``
-    source get their own scale instead of ``scales`` (see `task_objects`)."""
+                   test_fraction: float = 0.1, progress: bool = False,
+                   rejected: list | None = None) -> list[ManifestEntry]:
+    """Enumerate a source and hash each raw mesh. Every entry is validated exactly as
+    `load_manifest` validates a line, so a built manifest always loads. Objects that cannot be
+    entries (a missing or unreadable file, a directory or device, a path or symlink leaving the
+    source root) are appended to ``rejected`` as `Rejected`, or, when it is None, reported on
+    stderr. ``count`` counts accepted objects (a rejected file does not take an object's place).
+    Objects of the ``tasks`` source get their own scale instead of ``scales``."""
     scales = tuple(float(s) for s in scales)
     if not scales or min(scales) <= 0:
         raise ValueError(f"manifest scales must be positive metres, got {scales}")
+    if len(set(scales)) != len(scales):
+        raise ValueError(f"manifest scales must be distinct, got {scales}")
     if not 0 <= test_fraction <= 1:
         raise ValueError(f"test_fraction must be in [0, 1], got {test_fraction}")
-    refs = list(iter_source(source, count))
+    # file sources are enumerated lazily until `count` objects are accepted: a rejected entry does
+    # not take an object's place
+    lazy = canonical_source(source).partition(":")[0] in ("dir", "dexgraspnet")
+    refs = iter_source(source, None if lazy else count)
     if progress:
         from tqdm import tqdm
-        refs = tqdm(refs, desc="hashing", unit="obj")
+        refs = tqdm(refs, desc="hashing", unit="obj", total=count)
     out = []
+
+    def reject(ref, exc: ObjectError):
+        r = Rejected(ref.object_id, ref.path, exc.reason.value, str(exc))
+        if rejected is None:
+            print(f"warning: skipped {r.message}", file=sys.stderr, flush=True)
+        else:
+            rejected.append(r)
+
     for ref in refs:
+        if count is not None and len(out) >= count:
+            break
         try:
+            resolve(ref.source, ref.path, ref.object_id, ref.family)  # inside the root, before reading
             sha = hashlib.sha256(ref.read_bytes()).hexdigest()
-        except MeshProcessingError as exc:
-            print(f"warning: skipped {exc}", flush=True)
-            continue
-        # a task object has one scale, its own: its virtual joint's anchor is in metres at it
-        sc = (task_objects.build(ref.path).scale_m,) if ref.source == "tasks" else scales
-        out.append(ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, sc,
-                                 split_of(ref.object_id, test_fraction)))
+            # a task object has one scale, its own: its virtual joint's anchor is in metres at it
+            sc = (task_objects.build(ref.path).scale_m,) if ref.source == "tasks" else scales
+            e = ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, sc,
+                              split_of(ref.object_id, test_fraction))
+            out.append(_entry(json.loads(e.to_json()), ref.object_id))  # the loader's own checks
+        except ObjectError as exc:
+            reject(ref, exc)
     return out
 
 
@@ -106,7 +137,7 @@ def write_manifest(entries: Iterable[ManifestEntry], path: str | Path) -> Path:
     return path
 
 
-def _entry(obj, where: str) -> ManifestEntry:
+def _entry(obj, where: str, check_paths: bool = True) -> ManifestEntry:
     if not isinstance(obj, dict):
         raise ManifestError(Reason.MALFORMED_LINE, where, "a line must be a JSON object")
     missing, extra = set(_FIELDS) - set(obj), set(obj) - set(_FIELDS)
@@ -124,12 +155,16 @@ def _entry(obj, where: str) -> ManifestEntry:
     if not sc or not all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0 < s < 10
                          for s in sc):
         raise ManifestError(Reason.SCHEMA, where, f"scales must be numbers in (0, 10) metres, got {sc}")
+    if len(set(sc)) != len(sc):
+        raise ManifestError(Reason.SCHEMA, where, f"scales must be distinct, got {sc}")
     if obj["split"] not in ("train", "test"):
         raise ManifestError(Reason.SCHEMA, where, f"split must be 'train' or 'test', got {obj['split']!r}")
     e = ManifestEntry(obj["id"], obj["source"], obj["path"], obj["family"], obj["sha256"],
                       tuple(float(s) for s in sc), obj["split"])
     try:
-        e.ref()  # source known, path inside its root
+        canonical_source(e.source)  # source known
+        if check_paths:
+            e.ref()  # path inside its root (follows symlinks, so it depends on the files now)
     except SourceError as exc:
         raise ManifestError(Reason.UNKNOWN_SOURCE, where, exc.detail) from exc
     except ManifestError as exc:
@@ -137,11 +172,22 @@ def _entry(obj, where: str) -> ManifestEntry:
     return e
 
 
-def load_manifest(path: str | Path) -> list[ManifestEntry]:
-    """Read and validate a manifest; the first bad line raises ManifestError naming it."""
+def load_manifest(path: str | Path, check_paths: bool = True) -> list[ManifestEntry]:
+    """Read and validate a manifest; the first bad line raises ManifestError naming it.
+    ``check_paths=False`` skips the file-system checks of each path (a job reading back its own
+    manifest: its files are checked when each object is processed, and a file changed since must
+    cost that object, not the job)."""
     path = Path(path)
     entries, seen = [], {}
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ManifestError(Reason.MISSING_FILE, str(path), "the manifest file does not exist") from None
+    except UnicodeDecodeError as exc:
+        raise ManifestError(Reason.MALFORMED_LINE, str(path), f"not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise ManifestError(Reason.NOT_A_FILE, str(path), f"cannot read the manifest: {exc.strerror}") from None
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         where = f"{path}:{n}"
@@ -149,7 +195,9 @@ def load_manifest(path: str | Path) -> list[ManifestEntry]:
             obj = json.loads(line)
         except json.JSONDecodeError as exc:
             raise ManifestError(Reason.MALFORMED_LINE, where, f"not JSON ({exc.msg})") from exc
-        e = _entry(obj, where)
+        except RecursionError:
+            raise ManifestError(Reason.MALFORMED_LINE, where, "JSON nested too deeply") from None
+        e = _entry(obj, where, check_paths)
         if e.id in seen:
             raise ManifestError(Reason.DUPLICATE_ID, where, f"id {e.id!r} already on line {seen[e.id]}")
         seen[e.id] = n

@@ -1,9 +1,13 @@
 """Per-object pipeline: load -> validate -> repair -> normalize -> CoACD -> surface -> MJCF.
 
-Idempotent and cached: ``process_object`` returns the cache entry for (raw mesh sha256,
-config hash) if it exists, else builds it atomically (``cache.atomic_entry``). Failures are
-returned as ``ProcessedObject(status="failed", reason=...)``; deterministic ones (anything
-decided by the mesh bytes) are cached like successes, a missing file is not.
+Idempotent and cached: ``process_object`` returns the cache entry for (``object_key``, config
+hash) if it exists, else builds it atomically (``cache.atomic_entry``). The key is the raw mesh
+sha256 together with everything else that decides the result: the file type the bytes are
+parsed as, and existing DexGraspNet pieces or a task object's builder. Failures are returned as
+``ProcessedObject(status="failed", reason=...)``; deterministic ones (anything decided by the
+mesh bytes) are cached like successes, a missing file is not. A cache entry may have been made
+for another object with the same bytes: what is returned always carries the caller's object id
+(and a failure message naming it).
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +30,7 @@ from .mjcf import check_mjcf, object_mjcf
 from .sources import ObjectRef
 from .surface import watertight_surface
 
-__all__ = ["ProcessedObject", "process_object", "load_processed"]
+__all__ = ["ProcessedObject", "process_object", "load_processed", "object_key", "cached", "as_object"]
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,33 @@ def load_processed(entry: Path, cache_hit: bool = True) -> ProcessedObject:
         centre=tuple(meta.get("centre", (0, 0, 0))), factor=meta.get("factor", 1.0),
         piece_volumes=tuple(meta.get("piece_volumes", ())),
         surface_origin=meta.get("surface_origin", ""), timings=meta.get("timings", {}))
+
+
+def object_key(ref: ObjectRef, mesh_sha256: str) -> str:
+    """Cache key (64 hex) of an object whose raw bytes hash to ``mesh_sha256``: the same bytes
+    read as another file type, or with other existing pieces, are another entry."""
+    parts = [mesh_sha256, ref.file_type]
+    if ref.source == "tasks":  # pieces come from the task object's builder, not from CoACD
+        parts.append(f"tasks:{ref.path}")
+    parts += [hashlib.sha256(p.read_bytes()).hexdigest() for p in ref.piece_files()]
+    return hashlib.sha256("|".join(parts).encode()).hexdigest()
+
+
+def as_object(p: ProcessedObject, ref: ObjectRef) -> ProcessedObject:
+    """``p`` (maybe a cache entry made for another object with the same bytes) labelled with
+    ``ref``'s object id, its failure message naming ``ref``."""
+    if p.object_id == ref.object_id:
+        return p
+    message = p.message
+    if not p.ok:
+        message = f"{ref.object_id}: {p.reason}: {p.meta.get('detail', p.message)}"
+    return replace(p, object_id=ref.object_id, message=message)
+
+
+def cached(ref: ObjectRef, mesh_sha256: str, cfg: ProcessConfig, root: str | Path | None = None):
+    """The finished cache entry of ``ref`` (as `as_object`), or None."""
+    final = entry_dir(cache_root(root), object_key(ref, mesh_sha256), cfg.hash())
+    return as_object(load_processed(final), ref) if (final / layout.META).is_file() else None
 
 
 def _build(ref: ObjectRef, raw: bytes, cfg: ProcessConfig, tmp: Path, meta: dict) -> None:
@@ -175,9 +206,14 @@ def process_object(ref: ObjectRef, cfg: ProcessConfig | None = None,
         return ProcessedObject(ref.object_id, "failed", Reason.SHA_MISMATCH.value,
                                f"{ref.object_id}: sha256_mismatch: file sha256 {sha[:12]}... "
                                f"!= manifest {expected_sha256[:12]}...; rebuild the manifest")
-    final = entry_dir(cache_root(root), sha, chash)
+    try:
+        key = object_key(ref, sha)
+    except (OSError, MeshProcessingError) as exc:
+        return ProcessedObject(ref.object_id, "failed", Reason.MISSING_FILE.value,
+                               f"{ref.object_id}: {Reason.MISSING_FILE.value}: its pieces cannot be read: {exc}")
+    final = entry_dir(cache_root(root), key, chash)
     if (final / layout.META).is_file():
-        return load_processed(final, cache_hit=True)
+        return as_object(load_processed(final, cache_hit=True), ref)
     meta = {"meta_version": layout.META_VERSION, "process_version": PROCESS_VERSION,
             "object_id": ref.object_id, "source": ref.source, "path": ref.path,
             "mesh_sha256": sha, "config_hash": chash, "config": cfg.to_dict(), "timings": {}}
@@ -192,6 +228,6 @@ def process_object(ref: ObjectRef, cfg: ProcessConfig | None = None,
                     p.rmdir()
                 else:
                     p.unlink()
-            meta.update(status="failed", reason=exc.reason.value, message=str(exc))
+            meta.update(status="failed", reason=exc.reason.value, message=str(exc), detail=exc.detail)
         (tmp / layout.META).write_text(json.dumps(meta, indent=1, sort_keys=True))
-    return load_processed(final, cache_hit=False)
+    return as_object(load_processed(final, cache_hit=False), ref)

@@ -6,8 +6,12 @@ Source URIs (the ``--source`` argument and the manifest's ``source`` field):
   path is its index, e.g. ``"17"``.
 - ``dexgraspnet:ROOT``: DexGraspNet's meshdata layout, ``ROOT/<code>/coacd/decomposed.obj``; the
   path is ``<code>/coacd/decomposed.obj``; its ``coacd_convex_piece_<i>.obj`` are reused.
-- ``dir:ROOT``: every obj/stl/ply/off/glb file under ROOT (recursive, sorted); the path is the
-  file's path relative to ROOT.
+- ``dir:ROOT``: every obj/stl/ply/off/glb entry under ROOT (recursive, sorted); the path is the
+  entry's path relative to ROOT. Entries that are not regular files inside ROOT (a directory
+  named ``x.obj``, a device, a looping or escaping symlink) are still enumerated, so the manifest
+  builder can record why each one was rejected. The id is the sanitised path (``_id_from_path``);
+  an id longer than 200 characters, or one that another path of the source already sanitises to,
+  gets a hash of its path as suffix, so ids are unique and valid manifest ids.
 - ``pybullet``: pybullet_data/random_urdfs/<n>/<n>.obj (needs the optional pybullet package).
 - ``pkg:MODULE[/SUBDIR]``: the files of an installed Python package (e.g.
   ``pkg:pybullet_data``, ``pkg:metaworld/assets/objects/meshes``), like ``dir:`` but the root is
@@ -21,7 +25,10 @@ Paths are always relative to the source root; ``resolve`` rejects any that escap
 
 from __future__ import annotations
 
+import hashlib
+import os
 import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -59,10 +66,24 @@ class ObjectRef:
             seed, index = _procedural_seed(self.source), int(self.path)
             return procedural.generate(seed, index).obj_bytes
         try:
-            return self.file.read_bytes()
-        except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:
+            st = os.stat(self.file)  # follows symlinks
+        except FileNotFoundError as exc:
             raise MeshProcessingError(Reason.MISSING_FILE, self.object_id,
                                       f"mesh file {self.file} does not exist") from exc
+        except OSError as exc:  # a looping symlink, a path through a file, no permission
+            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id,
+                                      f"{self.file} cannot be opened: {exc.strerror}") from exc
+        if not stat.S_ISREG(st.st_mode):  # never read a directory, a FIFO or /dev/zero
+            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id, f"{self.file} is {kind}")
+        try:
+            return self.file.read_bytes()
+        except FileNotFoundError as exc:
+            raise MeshProcessingError(Reason.MISSING_FILE, self.object_id,
+                                      f"mesh file {self.file} does not exist") from exc
+        except OSError as exc:
+            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id,
+                                      f"{self.file} cannot be read: {exc.strerror}") from exc
 
     def piece_files(self) -> list[Path]:
         """Existing CoACD pieces next to a DexGraspNet decomposed.obj, in index order."""
@@ -130,10 +151,33 @@ def _pybullet_root() -> Path:
     return Path(pybullet_data.getDataPath()) / "random_urdfs"
 
 
+MAX_ID_LEN = 200  # the manifest's id limit
+
+
 def _id_from_path(rel: str) -> str:
     """'sub dir/box.obj' -> 'sub_dir__box.obj' (the extension stays: box.obj and box.stl differ)."""
     parts = [re.sub(r"[^A-Za-z0-9._-]+", "_", p) for p in rel.split("/")]
     return "__".join(parts).lstrip("._-") or "object"
+
+
+def _with_path_hash(object_id: str, rel: str) -> str:
+    """``object_id`` cut to fit MAX_ID_LEN with ``-<12 hex of sha256(rel)>`` appended."""
+    tag = hashlib.sha256(rel.encode()).hexdigest()[:12]
+    return f"{object_id[:MAX_ID_LEN - 13]}-{tag}"
+
+
+def unique_ids(rels: list[str]) -> list[str]:
+    """Ids of the sorted relative paths ``rels``: ``_id_from_path``, except that an id over
+    MAX_ID_LEN characters, or one an earlier path already has, gets a path hash as suffix
+    (deterministic: the same folder gives the same ids)."""
+    out, seen = [], set()
+    for rel in rels:
+        oid = _id_from_path(rel)
+        if len(oid) > MAX_ID_LEN or oid in seen:
+            oid = _with_path_hash(oid, rel)
+        seen.add(oid)
+        out.append(oid)
+    return out
 
 
 def iter_source(uri: str, count: int | None = None) -> Iterator[ObjectRef]:
@@ -156,18 +200,18 @@ def iter_source(uri: str, count: int | None = None) -> Iterator[ObjectRef]:
     if not root.is_dir():
         raise SourceError(Reason.UNKNOWN_SOURCE, uri, f"source folder {root} does not exist")
     if kind == "dexgraspnet":
-        files = sorted(root.glob("*/coacd/decomposed.obj"))
-        make_id = lambda rel: rel.split("/", 1)[0]  # noqa: E731  (the object code)
+        rels = sorted(p.relative_to(root).as_posix() for p in root.glob("*/coacd/decomposed.obj"))
+        ids = [rel.split("/", 1)[0] for rel in rels]  # the object code
     else:
-        files = sorted(p for p in root.rglob("*")
-                       if p.is_file() and p.suffix.lower().lstrip(".") in MESH_EXTENSIONS
-                       and not p.name.endswith("_coll.obj"))
-        make_id = _id_from_path
-    for n, p in enumerate(files):
+        # every entry with a mesh suffix, whatever it is (rglob does not follow directory links):
+        # the manifest builder rejects the unusable ones with a reason instead of losing them
+        rels = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                      if p.suffix.lower().lstrip(".") in MESH_EXTENSIONS and not p.name.endswith("_coll.obj"))
+        ids = unique_ids(rels)
+    for n, (rel, oid) in enumerate(zip(rels, ids)):
         if count is not None and n >= count:
             return
-        rel = p.relative_to(root).as_posix()
-        yield ObjectRef(make_id(rel), source, rel, p.suffix.lower().lstrip("."))
+        yield ObjectRef(oid, source, rel, Path(rel).suffix.lower().lstrip("."))
 
 
 def resolve(source: str, path: str, object_id: str, family: str = "") -> ObjectRef:
@@ -184,7 +228,10 @@ def resolve(source: str, path: str, object_id: str, family: str = "") -> ObjectR
         if not path.isdigit():
             raise ManifestError(Reason.SCHEMA, object_id, f"procedural path must be an index, got {path!r}")
         return ObjectRef(object_id, source, path, "obj", family)
-    target = (root / path).resolve()
+    try:
+        target = (root / path).resolve()
+    except (RuntimeError, OSError) as exc:  # a symlink loop
+        raise ManifestError(Reason.NOT_A_FILE, object_id, f"path {path!r} cannot be resolved: {exc}") from None
     if Path(path).is_absolute() or not target.is_relative_to(root.resolve()):
         raise ManifestError(Reason.PATH_ESCAPES_ROOT, object_id,
                             f"path {path!r} resolves outside the source root {root}")

@@ -58,6 +58,8 @@ def register_synth(sub: argparse._SubParsersAction) -> None:
 
 
 def _synth(args) -> int:
+    if args.num < 1:
+        raise ValueError(f"--num must be >= 1 (grasps per object scale), got {args.num}")
     import dataclasses
 
     import pyarrow.parquet as pq

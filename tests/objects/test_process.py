@@ -9,7 +9,7 @@ from datagen.objects import layout, procedural
 from datagen.objects import process as process_mod
 from datagen.objects.cache import entry_dir
 from datagen.objects.mjcf import check_mjcf
-from datagen.objects.process import process_object
+from datagen.objects.process import object_key, process_object
 from datagen.objects.sources import iter_source
 
 _real_surface = process_mod.watertight_surface
@@ -24,7 +24,7 @@ def test_mug_end_to_end(cache, fast_cfg):
     r = process_object(_ref(MUG), fast_cfg)
     assert r.ok, r.message
     assert not r.cache_hit
-    assert r.entry == entry_dir(cache, r.mesh_sha256, fast_cfg.hash())
+    assert r.entry == entry_dir(cache, object_key(_ref(MUG), r.mesh_sha256), fast_cfg.hash())
     assert len(r.piece_volumes) >= 2  # a mug is not convex
     assert all(v > fast_cfg.min_part_volume for v in r.piece_volumes)
     assert all(p.is_file() for p in r.piece_paths)

@@ -18,7 +18,7 @@ def test_config_validation_names_the_field():
         JobConfig(scales=(0.08, -1.0))
     with pytest.raises(JobError, match="unknown keys"):
         JobConfig.from_dict({"cuont": 3})
-    with pytest.raises(ValueError, match="coacd_threshold"):  # nested configs are validated up front
+    with pytest.raises(JobError, match="coacd_threshold"):  # nested configs are validated up front
         JobConfig(process={"coacd_threshold": 5.0})
 
 

@@ -71,6 +71,32 @@ def test_sigkilled_driver_resumes_to_the_same_rows(tmp_path, mesh_source, cache_
     assert status["failures"] == {"process:" + status_reason(out): 1}
 
 
+def test_ctrl_c_abandons_running_shards_cleanly(tmp_path, mesh_source, cache_dir, reference):
+    cfg = tiny_config(mesh_source)
+    out = tmp_path / "job"
+    (tmp_path / "job.yaml").write_text(yaml.safe_dump(cfg.to_dict()))
+    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--config", str(tmp_path / "job.yaml"),
+           "--num-cpus", "1", "--cache", cache_dir, "--no-progress"]
+    # SIGINT as a terminal's Ctrl-C sends it: to the whole process group (default disposition, even
+    # when this test runs in a background shell that ignores SIGINT)
+    proc = subprocess.Popen(cmd, cwd=REPO, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        _wait_for(lambda: (out / "progress").is_dir() and any((out / "progress").iterdir()), 150, "a running shard")
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "datagen run: interrupted; rerun the same command to resume"
+    assert "Traceback" not in err
+    status = run_job(cfg, out, num_cpus=2, cache=cache_dir, progress=False, log=lambda *a: None)
+    assert status["complete"] and comparable_rows(out) == reference
+
+
 def status_reason(out: Path) -> str:
     import pyarrow.parquet as pq
 
