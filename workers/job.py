@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 
-from datagen.synth.commands import FORCE_CLOSURE_SEEDS
+from datagen.synth.config import FORCE_CLOSURE_SEEDS
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
 

@@ -6,12 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["FORCE_CLOSURE_SEEDS", "register_synth", "load_target"]
-
-#: seeds per grasp of force-closure synthesis by default (``datagen synth`` and the job default):
-#: the best of 8 starts by epsilon raised six-direction success on the real-object set from 38%
-#: to 66% (Shadow, benchmarks/results/quality.md)
-FORCE_CLOSURE_SEEDS = 8
+__all__ = ["register_synth", "load_target"]
 
 
 def load_target(path: str | Path, scale: float, cache: str | None = None, process_config: str | None = None):
@@ -72,6 +67,8 @@ def _synth(args) -> int:
     from datagen.synth.rows import result_table
 
     cfg = SynthConfig.from_dict(yaml.safe_load(Path(args.config).read_text()) if args.config else {}, where=args.config or "defaults")
+    from datagen.synth.config import FORCE_CLOSURE_SEEDS
+
     if args.seeds_per_grasp is None and args.config is None and args.task == "force_closure":
         args.seeds_per_grasp = FORCE_CLOSURE_SEEDS
     overrides = {k: v for k, v in (("iters", args.iters), ("seed", args.seed),
