@@ -29,13 +29,13 @@ class EnergyWeights(Config):
                 raise ConfigError(f"EnergyWeights.{f.name} must be a finite number >= 0, got {v!r}")
 
 
-@dataclass(frozen=True)
 #: seeds per grasp of force-closure synthesis by default (``datagen synth`` and the job default):
 #: the best of 8 starts raised six-direction success on the real-object set from 38% to 66%
 #: (Shadow, 224 grasps; benchmarks/results/quality.md)
 FORCE_CLOSURE_SEEDS = 8
 
 
+@dataclass(frozen=True)
 class SynthConfig(Config):
     """Optimizer and energy settings (defaults follow the paper and ARCHITECTURE.md "Synthesis")."""
 
