@@ -112,3 +112,15 @@ browser:
 
 test-view: $(STAMP) browser
 	$(PY) -m pytest -q tests/view
+
+# Grasp quality on real objects (issue 19): the default force-closure job per hand on
+# manifests/real_dev.jsonl -> benchmarks/results/quality.md. The meshes come from registry
+# packages (pybullet_data; metaworld's assets, installed without its dependencies).
+.PHONY: real-objects bench-quality
+BENCH_QUALITY_ARGS ?=
+real-objects: $(STAMP)
+	$(PY) -m pip install --quiet pybullet==3.2.7
+	$(PY) -m pip install --quiet --no-deps metaworld==3.1.1
+
+bench-quality: $(STAMP) hands real-objects
+	$(PY) -m benchmarks.bench_quality $(BENCH_QUALITY_ARGS)

@@ -45,7 +45,7 @@ def task_rows() -> list[tuple[str, str, str]]:
     """(name, the object it runs on or 'any object', description) of every built-in task."""
     import yaml
 
-    from datagen.synth.config import TASK_DIR, builtin_tasks
+    from datagen.tasks.spec import SPEC_DIR as TASK_DIR, builtin_tasks
 
     rows = []
     for name in builtin_tasks():

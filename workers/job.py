@@ -146,7 +146,7 @@ class JobConfig:
         cannot load, before any work starts. Not part of construction: ``datagen status`` reads
         job.json on machines that may lack a hand's asset package."""
         from datagen.hands import BUILTIN_HANDS, available_hands
-        from datagen.synth.config import builtin_tasks, load_task
+        from datagen.tasks import builtin_tasks, load_task
 
         names = sorted(BUILTIN_HANDS)
         if self.hand in BUILTIN_HANDS:

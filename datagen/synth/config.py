@@ -65,6 +65,7 @@ class SynthConfig(Config):
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 80  #: iterations every seed runs before the best seed of each grasp is kept
+    seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     seed: int = 0
 
     def __post_init__(self):

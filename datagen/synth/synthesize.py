@@ -24,6 +24,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
+from datagen.synth.select import best_seeds
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
@@ -97,29 +98,6 @@ def _resolve_fingers(hand, task: TaskSpec) -> list[int]:
     return [hand.fingertip_names.index(f) for f in present]
 
 
-def _best_seeds(hand, targets, seed_index, x, energy, tip_spheres, task: TaskSpec, cfg: SynthConfig,
-                S: int) -> torch.Tensor:
-    """(B,) row of the best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1``).
-
-    Force closure (gamma 180 deg, several contacts): the largest epsilon of the seed's
-    fingertip contacts (the synthesis epsilon of the final grasp predicts the MuJoCo verdict,
-    and whether a pose reaches force closure is settled by the time the fingers first touch);
-    ties (no seed in closure) and other tasks: the lowest energy."""
-    with torch.no_grad():
-        score = -energy
-        if task.gamma_deg >= 180 and tip_spheres.numel() > 1:
-            st = hand_object_state(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints),
-                                   tip_spheres, sphere_margin=cfg.sphere_margin_m, self_collision=False)
-            eps = epsilon_metric(st.contact_points.double(), st.contact_normals.double(), cfg.mu,
-                                 normalize=cfg.normalize, contact_model=cfg.contact_model,
-                                 torsional_mu=cfg.torsional_mu).to(energy.dtype)
-            usable = (st.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m)
-            # epsilon first; among seeds of equal epsilon (e.g. all 0) the lower energy
-            score = torch.where(usable, eps, torch.zeros_like(eps)) * 1e3 - energy.clamp(-1e2, 1e2) / 1e3
-        rows = score.reshape(-1, S).argmax(-1)
-        return torch.arange(rows.shape[0], device=rows.device) * S + rows
-
-
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
                generator: torch.Generator | None = None, callback=None) -> SynthesisResult:
     """Optimize ``num_per_object`` poses on each target; see the module docstring."""
@@ -157,7 +135,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     if S > 1:  # multi-start: every seed runs the first iterations, the best seed of each grasp goes on
         first = min(cfg.seed_select_iter, cfg.iters)
         x, e, extras = opt.run(energy_on(seed_index), x, first, callback=callback)
-        best = _best_seeds(hand, targets, seed_index, x, e, tip_spheres, task, cfg, S)
+        best = best_seeds(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
+                          tip_spheres, task, cfg, S)
         x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
         root, joints = root[best], joints[best]
     if cfg.iters > first or S == 1:

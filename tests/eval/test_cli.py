@@ -168,7 +168,7 @@ def test_version_and_listings(capsys):
         main(["--version"])
     assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"datagen {datagen.__version__}"
     from datagen.hands.load import BUILTIN_HANDS
-    from datagen.synth.config import builtin_tasks
+    from datagen.tasks import builtin_tasks
 
     assert main(["hands"]) == 0
     lines = capsys.readouterr().out.splitlines()

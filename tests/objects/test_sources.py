@@ -98,3 +98,22 @@ def test_procedural_manifest(tmp_path):
 def test_unknown_source_is_named():
     with pytest.raises(SourceError, match="unknown_source"):
         list(iter_source("s3://bucket"))
+
+
+def test_pkg_source_finds_an_installed_packages_files():
+    """``pkg:MODULE/SUBDIR`` roots a source where the package is installed: gymnasium_robotics
+    (a dependency) carries the Shadow hand's STL meshes; each ref reads that very file."""
+    import importlib.util
+    from pathlib import Path
+
+    from datagen.objects.sources import resolve
+
+    uri = "pkg:gymnasium_robotics/envs/assets/stls/hand"
+    root = Path(importlib.util.find_spec("gymnasium_robotics").submodule_search_locations[0]) / "envs/assets/stls/hand"
+    refs = list(iter_source(uri, 3))
+    assert canonical_source(uri) == uri and len(refs) == 3
+    for r in refs:
+        assert r.file == root / r.path and r.read_bytes() == (root / r.path).read_bytes()
+        assert resolve(uri, r.path, r.object_id).file == r.file
+    with pytest.raises(SourceError, match="no_such_pkg_xyz.*not installed"):
+        list(iter_source("pkg:no_such_pkg_xyz", 1))

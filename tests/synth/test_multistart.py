@@ -9,10 +9,10 @@ import trimesh
 
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
-from datagen.synth.energies import contact_sphere_index, hand_object_state
+from datagen.synth.energies import contact_sphere_index
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
-from datagen.synth.synthesize import _best_seeds
+from datagen.synth.select import best_seeds, link_contacts, link_epsilon
 from datagen.tasks import load_task
 from datagen.wrench import epsilon_metric
 
@@ -45,29 +45,55 @@ def test_continued_schedule_starts_with_the_decayed_step():
     assert math.isclose(float(x.translation[0, 0]), -0.01 * (0.5 * 0.5 + 0.25 * 0.725), rel_tol=1e-6)
 
 
-def test_best_seed_has_the_largest_epsilon_of_its_group(hand, box):
-    """_best_seeds keeps, per grasp, a seed whose fingertip contacts have the largest epsilon
-    (checked seed by seed with the public epsilon metric), or the lowest energy on a tie."""
+def test_link_epsilon_batches_by_contact_count(hand, box):
+    """link_epsilon groups samples by their number of touching links: each sample's value must be
+    epsilon_metric of that sample's touching contacts alone (a per-sample loop, the oracle)."""
+    res = synthesize(hand, [box], load_task("force_closure"), SynthConfig(iters=60, seed=2), 8)
+    index = torch.zeros(8, dtype=torch.long)
+    p, n, touching = link_contacts(hand, [box], index, res.grasp[:, :7], res.grasp[:, 7:], 0.004)
+    eps = link_epsilon(p, n, touching, 0.5)
+    assert len(set(touching.sum(-1).tolist())) > 1  # several groups
+    for b in range(8):
+        k = touching[b].nonzero().squeeze(-1)
+        want = epsilon_metric(p[b, k].double()[None], n[b, k].double()[None], 0.5)[0] if k.numel() >= 2 else 0.0
+        assert math.isclose(float(eps[b]), float(want), abs_tol=1e-9)
+
+
+def test_link_contacts_are_surface_points_of_touching_links(hand, box):
+    """Each touching link's contact lies on the object's surface (exact mesh distance ~0) and
+    its normal points into the object (the exact SDF's outward normal, reversed; at the box's edges
+    the grid's normal is a blend of the two faces', so only the typical contact matches exactly)."""
+    res = synthesize(hand, [box], load_task("force_closure"), SynthConfig(iters=60, seed=2), 4)
+    p, n, touching = link_contacts(hand, [box], torch.zeros(4, dtype=torch.long), res.grasp[:, :7],
+                                   res.grasp[:, 7:], 0.004)
+    q = box.query(p[touching])
+    assert touching.any()
+    assert q.distance.abs().max() < 1e-3
+    cos = (q.normal * -n[touching]).sum(-1)
+    assert cos.min() > 0 and cos.median() > 0.99
+
+
+def test_best_seed_has_the_largest_score_of_its_group(hand, box):
+    """best_seeds keeps, per grasp, the seed of largest whole-hand epsilon among seeds whose
+    fingertips are in contact, and on a tie the lower energy."""
     cfg = SynthConfig()
     task = load_task("force_closure")
     S, B = 4, 3
     index = torch.zeros(B * S, dtype=torch.long)
-    # short descent so that contacts exist and epsilons differ
     res = synthesize(hand, [box], task, SynthConfig(iters=60, seed=2), B * S)
-    x = PoseVariables(res.grasp[:, :3], res.grasp[:, 3:7], res.grasp[:, 7:])
+    root, joints = res.grasp[:, :7], res.grasp[:, 7:]
     energy = torch.linspace(0.0, 1.0, B * S)
     tips = contact_sphere_index(hand)
-    best = _best_seeds(hand, [box], index, x, energy, tips, task, cfg, S)
-    st = hand_object_state(hand, [box], index, x.root_pose(), hand.apply_couplings(x.joints), tips,
-                           sphere_margin=cfg.sphere_margin_m, self_collision=False)
-    eps = epsilon_metric(st.contact_points.double(), st.contact_normals.double(), cfg.mu)
-    usable = st.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
-    eps = torch.where(usable, eps, torch.zeros_like(eps)).reshape(B, S)
+    best = best_seeds(hand, [box], index, root, joints, energy, tips, task, cfg, S)
+    p, n, touching = link_contacts(hand, [box], index, root, joints, cfg.seed_contact_gap_m)
+    usable = res.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
+    eps = torch.stack([epsilon_metric(p[b, touching[b]].double()[None], n[b, touching[b]].double()[None], cfg.mu)[0]
+                       if int(touching[b].sum()) >= 2 and usable[b] else torch.tensor(0.0, dtype=torch.float64)
+                       for b in range(B * S)]).reshape(B, S)
     assert best.shape == (B,)
     for b in range(B):
         k = int(best[b]) - b * S
         assert 0 <= k < S
-        assert float(eps[b, k]) >= float(eps[b].max()) - 1e-6
         ties = (eps[b] >= eps[b].max() - 1e-6).nonzero().squeeze(-1)
         assert k == int(ties.min())  # energy increases with the row: the first tie has the lowest
 
