@@ -91,14 +91,16 @@ def summarize(rows: dict, sel: np.ndarray) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hands", default=",".join(HANDS), help="comma-separated hands")
-    ap.add_argument("--grasps", type=int, default=8, help="grasps per object and scale")
-    ap.add_argument("--leap-grasps", type=int, default=4, help="grasps per object and scale for leap (slow)")
+    ap.add_argument("--grasps", default="shadow=8,shadow_e3m5=4,allegro=4,leap=1",
+                    help="grasps per object and scale, per hand (HAND=N,...; a plain N for every hand)")
     ap.add_argument("--objects", type=int, default=14, help="objects of the manifest (first N)")
     ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="job directories")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     synth = json.loads(args.synth)
+    per_hand = {"*": int(args.grasps)} if args.grasps.isdigit() else {
+        k: int(v) for k, v in (x.split("=") for x in args.grasps.split(","))}
     commit = code_version()
     families = {e.id: e.family for e in load_manifest(MANIFEST)}
     lines = ["# Grasp quality on real objects (default force-closure job)", "",
@@ -110,7 +112,7 @@ def main() -> None:
              "is a row; rejections count as failures." + (f" Variant: synth {synth}." if synth else ""), ""]
     headline = {}
     for hand in args.hands.split(","):
-        grasps = args.leap_grasps if hand == "leap" else args.grasps
+        grasps = per_hand[hand] if hand in per_hand else per_hand.get("*", 8)
         tag = "" if not synth else "-" + "-".join(f"{k}{v}" for k, v in sorted(synth.items()))
         job = args.work / f"{hand}-{commit}-g{grasps}-o{args.objects}{tag}"
         wall = run_job(hand, job, grasps, args.objects, synth)
