@@ -24,7 +24,7 @@ METRICS = (
     ("pregrasp_penetration_m", "penetration at the pregrasp"),
     ("self_penetration_m", "self penetration"),
     ("min_distance_m", "min hand-object distance"),
-    ("max_penetration", "deepest sphere penetration (synthesis)"),
+    ("sphere_penetration_m", "deepest sphere penetration (synthesis)"),
     ("num_contacts", "contacts"),
     ("touching_links", "touching links"),
     ("energy_total", "energy"),

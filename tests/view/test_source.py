@@ -37,8 +37,8 @@ def test_filters_match_arrow_compute(source, job_dir):
     assert list(ok) == list(np.flatnonzero(t["success"].to_numpy(zero_copy_only=False)))
     assert len(source.select(verdict="failure")) + len(ok) == len(source)
     obj = t["object_id"][0].as_py()
-    scale = float(t["object_scale"][0].as_py())
-    want = pc.and_(pc.equal(t["object_id"], obj), pc.equal(t["object_scale"], pa.scalar(scale, pa.float32())))
+    scale = float(t["object_scale_m"][0].as_py())
+    want = pc.and_(pc.equal(t["object_id"], obj), pc.equal(t["object_scale_m"], pa.scalar(scale, pa.float32())))
     got = source.select(object_id=obj, scale=f"{scale:.3f} m", hand="shadow", task="force_closure")
     assert list(got) == list(np.flatnonzero(want.to_numpy(zero_copy_only=False)))
     reason = source.reasons()[0]
@@ -47,16 +47,16 @@ def test_filters_match_arrow_compute(source, job_dir):
 
 
 def test_renamed_columns_are_found(job_dir, tmp_path):
-    """Columns renamed for unit consistency (penetration_m <-> penetration, object_scale_m) open."""
+    """Tables from before the unit-suffix renames (schema v1: penetration, object_scale) open."""
     t = read_job(job_dir)
-    renamed = t.rename_columns([{"penetration_m": "penetration", "object_scale": "object_scale_m"}.get(n, n)
+    renamed = t.rename_columns([{"penetration_m": "penetration", "object_scale_m": "object_scale"}.get(n, n)
                                 for n in t.column_names])
     table = renamed.set_column(renamed.column_names.index("object_path"), "object_path",
                                pa.array([str(Path(job_dir) / p) for p in t["object_path"].to_pylist()]))
     pq.write_table(table, tmp_path / "renamed.parquet")
     src = open_source(tmp_path / "renamed.parquet")
-    assert src.column("penetration_m") == "penetration" and src.column("object_scale") == "object_scale_m"
-    assert [src.scale(i) for i in range(len(src))] == t["object_scale"].to_pylist()
+    assert src.column("penetration_m") == "penetration" and src.column("object_scale_m") == "object_scale"
+    assert [src.scale(i) for i in range(len(src))] == t["object_scale_m"].to_pylist()
     assert find_column(["a_deg"], "a") == "a_deg" and find_column(["b"], "b_m") == "b" and find_column([], "c") is None
 
 
