@@ -220,7 +220,11 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
     md += _columns_section(rows)
     md += ["## Reading", "", _READERS]
     pics, note = _render(job, rows, renders)
-    md += ["## Grasps", ""]
+    md += ["## Grasps", "",
+           "Browse these grasps in 3D: run `datagen view <this job directory>` and open the printed URL "
+           "(on a remote machine, first `ssh -L 8080:localhost:8080 <user>@<host>`, then open "
+           "http://localhost:8080/); `datagen view <job> --export DIR` writes self-contained HTML pages of a "
+           "few grasps. The pictures below are static renders.", ""]
     if pics:
         md += ["Each picture: columns = hand at the pregrasp, the grasp, after pregrasp -> grasp -> squeeze in "
                "MuJoCo; rows = two views (from beyond the object towards the palm, and 90 degrees around).", ""]
