@@ -1,7 +1,8 @@
 """Batched synthesis of hand poses for many objects at once (paper Sec. IV-C).
 
 ``synthesize(hand, targets, task, cfg, num_per_object)`` optimizes ``len(targets) *
-num_per_object`` poses in one tensor program: forward kinematics, energies and the optimizer are
+num_per_object`` poses in one tensor program (with ``cfg.seeds_per_grasp`` > 1, each pose is the
+best of that many starts after ``cfg.seed_select_iter`` iterations: :mod:`datagen.synth.select`): forward kinematics, energies and the optimizer are
 batched over all of them; only the distance queries loop over the distinct objects.
 
 Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/radians):
@@ -139,7 +140,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
                           tip_spheres, task, cfg, S)
         x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
         root, joints = root[best], joints[best]
-    if cfg.iters > first or S == 1:
+    if cfg.iters > first:
         x, _, extras = opt.run(energy_on(object_index), x, cfg.iters - first, callback=callback, first_iter=first)
     else:
         extras = {k: v[best] for k, v in extras.items()}
