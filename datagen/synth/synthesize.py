@@ -1,9 +1,10 @@
 """Batched synthesis of hand poses for many objects at once (paper Sec. IV-C).
 
 ``synthesize(hand, targets, task, cfg, num_per_object)`` optimizes ``len(targets) *
-num_per_object`` poses in one tensor program (with ``cfg.seeds_per_grasp`` > 1, each pose is the
-best of that many starts after ``cfg.seed_select_iter`` iterations: :mod:`datagen.synth.select`): forward kinematics, energies and the optimizer are
-batched over all of them; only the distance queries loop over the distinct objects.
+num_per_object`` poses in one tensor program: forward kinematics, energies and the optimizer are
+batched over all of them; only the distance queries loop over the distinct objects. With
+``cfg.seeds_per_grasp`` > 1 each pose is the best of that many starts, chosen after
+``cfg.seed_select_iter`` iterations (:mod:`datagen.synth.select`).
 
 Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/radians):
 ``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``squeeze`` the
