@@ -1,4 +1,6 @@
-"""Content-addressed cache of SDF grids (:class:`~datagen.objects.grid_sdf.GridSDF`), one per surface.
+"""Content-addressed cache of the distance grids of a surface: the SDF grid
+(:class:`~datagen.objects.grid_sdf.GridSDF`) and the exact SDF's candidate-culling grid
+(:class:`~datagen.objects.sdf.MeshSDF`), one of each per surface and build parameters.
 
 A grid is in normalized units, so one grid serves every scale of an object (a signed distance
 scales linearly with a uniform scale: sdf_s(x) = s * sdf_1(x / s)), every shard, CLI call and
@@ -14,6 +16,10 @@ digest) is rebuilt and replaced. A cache that cannot be written (read-only) only
 rebuild: the grid is still returned.
 
     grid, built = load_or_build(vertices, faces, resolution=64, root=None, exact=sdf)
+    sdf, built = load_or_build_mesh_sdf(vertices, faces, root=None)
+
+The MeshSDF's culling grid is stored compactly (``MeshSDF.candidate_grid``: each cell's
+candidates up to its count, int32, compressed) under ``<root>/grids/<key[:2]>/<key>.sdf.npz``.
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ from .grid_sdf import GridSDF
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GRID_VERSION", "grid_key", "grid_path", "load_grid", "load_or_build"]
+__all__ = ["GRID_VERSION", "grid_key", "grid_path", "load_grid", "load_or_build", "load_or_build_mesh_sdf"]
 
 GRID_VERSION = 1  #: bump when GridSDF.from_mesh computes different values for the same inputs
 
@@ -125,3 +131,60 @@ def load_or_build(vertices, faces, *, resolution: int = 64, margin: float = 0.25
     log.info("SDF grid %s built in %.2f s (resolution %d)", key[:12], time.perf_counter() - t0, resolution)
     _store(path, key, grid)
     return grid, True
+
+
+def _sdf_key(vertices, faces, params: dict) -> str:
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(np.asarray(vertices, np.float64)).tobytes())
+    h.update(b"|faces|")
+    h.update(np.ascontiguousarray(np.asarray(faces, np.int64)).tobytes())
+    h.update(json.dumps({"kind": "mesh_sdf_candidates", "version": GRID_VERSION, **params}, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def load_or_build_mesh_sdf(vertices, faces, *, grid_resolution: int = 32, max_candidates: int = 128,
+                           margin: float = 0.25, dtype: torch.dtype = torch.float32,
+                           root: str | Path | None = None):
+    """A :class:`~datagen.objects.sdf.MeshSDF` of the mesh ``(V, 3)`` / ``(T, 3)`` whose
+    candidate-culling grid comes from the cache under ``root`` (or is built and stored).
+
+    Returns ``(sdf, built)``; the SDF answers exactly as ``MeshSDF(vertices, faces, ...)`` does."""
+    from .sdf import MeshSDF
+
+    params = {"grid_resolution": int(grid_resolution), "max_candidates": int(max_candidates),
+              "margin": float(margin), "dtype": str(dtype)}
+    key = _sdf_key(vertices, faces, params)
+    path = cache_root(root) / "grids" / key[:2] / f"{key}.sdf.npz"
+    sdf = MeshSDF(vertices, faces, grid_resolution=0, dtype=dtype)
+    if grid_resolution <= 0:
+        return sdf, False
+    if path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                g = {k: z[k] for k in ("counts", "cand", "lo", "cell_size")}
+                check = json.loads(str(z["check"]))
+            g["res"], g["max_candidates"] = int(check["res"]), int(check["max_candidates"])
+            ok = (check.get("key") == key and check.get("sha256") == _digest(g["counts"], g["cand"], g["lo"])
+                  and g["res"] == grid_resolution and g["max_candidates"] == max_candidates)
+            if ok:
+                sdf.set_candidate_grid(g)
+                log.debug("exact-SDF culling grid %s loaded from %s", key[:12], path)
+                return sdf, False
+            log.warning("exact-SDF culling grid %s fails its check; rebuilding it", path)
+        except Exception as exc:  # noqa: BLE001 - any unreadable or inconsistent file is rebuilt
+            log.warning("exact-SDF culling grid %s unreadable (%s: %s); rebuilding it", path, type(exc).__name__, exc)
+    t0 = time.perf_counter()
+    sdf = MeshSDF(vertices, faces, grid_resolution=grid_resolution, max_candidates=max_candidates, margin=margin,
+                  dtype=dtype)
+    log.info("exact-SDF culling grid %s built in %.2f s", key[:12], time.perf_counter() - t0)
+    g = sdf.candidate_grid()
+    check = json.dumps({"key": key, "sha256": _digest(g["counts"], g["cand"], g["lo"]), "res": g["res"],
+                        "max_candidates": g["max_candidates"]})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, counts=g["counts"], cand=g["cand"], lo=g["lo"], cell_size=g["cell_size"],
+                                check=np.array(check))
+    except OSError as exc:
+        log.warning("exact-SDF culling grid %s not written (%s); it will be rebuilt next time", path, exc)
+    return sdf, True

@@ -41,17 +41,18 @@ class GraspTarget:
                   cache: str | Path | None = None) -> "GraspTarget":
         """From a mesh in normalized units (``scale`` metres per unit).
 
-        ``cache_grid``: take the SDF grid from (or store it in) the grid cache under the objects
-        cache root ``cache`` (None: ``$DATAGEN_CACHE``), see :mod:`datagen.objects.grid_cache`;
-        the grid is in normalized units, so one serves every scale.
+        ``cache_grid``: take the SDF grid and the exact SDF's culling grid from (or store them in)
+        the grid cache under the objects cache root ``cache`` (None: ``$DATAGEN_CACHE``), see
+        :mod:`datagen.objects.grid_cache`; both are in normalized units, so one serves every scale.
         """
         if not scale > 0:
             raise ValueError(f"{object_id}: scale must be > 0 metres, got {scale}")
-        sdf = MeshSDF(np.asarray(mesh.vertices), np.asarray(mesh.faces))
         if cache_grid:
+            sdf, _ = grid_cache.load_or_build_mesh_sdf(np.asarray(mesh.vertices), np.asarray(mesh.faces), root=cache)
             grid, _ = grid_cache.load_or_build(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed,
                                                root=cache, exact=sdf)
         else:
+            sdf = MeshSDF(np.asarray(mesh.vertices), np.asarray(mesh.faces))
             grid = GridSDF.from_mesh(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed, exact=sdf)
         hull = mesh.convex_hull
         pts, faces = trimesh.sample.sample_surface_even(hull, hull_samples, seed=seed)

@@ -89,3 +89,23 @@ def test_grasp_target_reuses_the_grid_across_scales(tmp_path, builds):
     # sdf_s(x) = s * sdf_1(x / s): the same grid answers at both scales
     p = torch.tensor([[0.0, 0.0, 0.05], [0.02, 0.01, 0.0]])
     assert torch.allclose(b.distance(p), 0.10 * a.grid.distance(p / 0.10, 1.0), atol=1e-7)
+
+
+def test_cached_exact_sdf_answers_exactly_like_a_fresh_one(tmp_path, monkeypatch):
+    from datagen.objects.sdf import MeshSDF
+
+    m = trimesh.creation.torus(0.7, 0.25)
+    fresh = MeshSDF(m.vertices, m.faces, grid_resolution=12)
+    a, built_a = grid_cache.load_or_build_mesh_sdf(m.vertices, m.faces, grid_resolution=12, root=tmp_path)
+    calls = []
+    real = MeshSDF._build_grid
+    monkeypatch.setattr(MeshSDF, "_build_grid", lambda self, *x: (calls.append(1), real(self, *x))[1])
+    b, built_b = grid_cache.load_or_build_mesh_sdf(m.vertices, m.faces, grid_resolution=12, root=tmp_path)
+    assert (built_a, built_b) == (True, False) and calls == []  # the second one built no culling grid
+    assert torch.equal(b.cells, fresh.cells) and torch.equal(b.counts, fresh.counts)
+    assert torch.equal(b.lo, fresh.lo) and torch.equal(b.cell_size, fresh.cell_size)
+    p = torch.tensor(np.random.default_rng(0).normal(size=(500, 3)) * 0.8, dtype=torch.float32)
+    r0, r1 = fresh.query(p, 0.1), b.query(p, 0.1)
+    assert torch.equal(r0.distance, r1.distance) and torch.equal(r0.face, r1.face)
+    _, built = grid_cache.load_or_build_mesh_sdf(m.vertices, m.faces, grid_resolution=10, root=tmp_path)
+    assert built  # another resolution is another entry
