@@ -2,10 +2,11 @@
 
 CPU seconds per grasp (process time, one thread) of, on the same grasps and in one run:
 
-* ``project``: `datagen.eval.Evaluator` with the default `EvalConfig` (the closing simulated
-  once and copied per direction, directions in lockstep, stop at the first failing check;
-  static metrics and epsilon included);
-* ``project, palm``: the same with ``hand_root: palm`` (wrist held, forearm out of the scene);
+* ``project, palm``: `datagen.eval.Evaluator` with the default `EvalConfig` (``hand_root:
+  palm``: wrist held, forearm out of the scene; the closing simulated once and copied per
+  direction, directions in lockstep, stop at the first failing check; static metrics and
+  epsilon included);
+* ``project, spec``: the same with ``hand_root: spec`` (the forearm and driven wrist joints);
 * ``peer loop``: a re-implementation of the loop structure of DexGraspBench's ``fcMocapEval``
   (read, not copied; github.com/JYChen18/DexGraspBench src/task/eval_func/{base,fc_mocap}.py):
   the hand rooted at the palm (its Shadow MJCF has no forearm), a pregrasp penetration check,
@@ -13,14 +14,17 @@ CPU seconds per grasp (process time, one thread) of, on the same grasps and in o
   pregrasp -> grasp -> squeeze, apply the force and step 10 x 50 steps, checking the object's
   pose after each 50 and stopping that direction at the first failure; the first failing
   direction ends the grasp. Same physics constants (the protocol, `EvalConfig`), same scene
-  (palm-rooted), contact metrics at the grasp pose as its ``_eval_pene_and_contact`` does; no
+  (palm-rooted, as the default), contact metrics at the grasp pose as its ``_eval_pene_and_contact`` does; no
   epsilon (its q1 metric is a separate pass).
 
 Each mode runs over all grasps ``--repeats`` times; the figure is the median over the runs of
 the mean CPU seconds per grasp. Verdict agreement (success or not) is reported against the
-project's default evaluator.
+project's default evaluator (hand_root palm).
 
-    python -m benchmarks.bench_eval --grasps A.parquet [B.parquet ...] [--limit 64] [--repeats 3]
+    python -m benchmarks.bench_eval --grasps A.parquet [B.parquet ...] [--limit 64] [--repeats 3] [--agreement]
+
+``--agreement``: also evaluate every row of the tables (no limit, not timed) under both rootings
+and report how often the verdicts agree (the measured set behind ``hand_root: palm``).
 
 Without ``--grasps`` it uses constructed grasps (a box against the Shadow palm, tests/eval/grasps.py).
 """
@@ -125,6 +129,7 @@ def main(argv=None) -> None:
     ap.add_argument("--grasps", nargs="*", default=[], help="grasp tables (Shadow, force_closure rows)")
     ap.add_argument("--limit", type=int, default=64, help="at most this many rows, spread over the tables")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--agreement", action="store_true", help="verdicts of every row under both rootings")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -133,15 +138,20 @@ def main(argv=None) -> None:
     hand = load_hand("shadow")
     with tempfile.TemporaryDirectory(prefix="bench-eval-") as tmp:
         grasps = load_grasps(args.grasps, args.limit, Path(tmp))
-        project = Evaluator(hand, EvalConfig())
-        palm = Evaluator(hand, EvalConfig(hand_root="palm"))
+        project = Evaluator(hand, EvalConfig(hand_root="palm"))
+        spec = Evaluator(hand, EvalConfig(hand_root="spec"))
         peer = Evaluator(hand, EvalConfig(hand_root="palm"))
-        modes = {"project (default, hand_root spec)": lambda p, q: project.evaluate(p, q).success,
-                 "project, hand_root palm": lambda p, q: palm.evaluate(p, q).success,
+        modes = {"project (default, hand_root palm)": lambda p, q: project.evaluate(p, q).success,
+                 "project, hand_root spec": lambda p, q: spec.evaluate(p, q).success,
                  "peer loop (palm-rooted, closing per direction)": lambda p, q: peer_loop(peer, p, q)}
         results = {k: run_mode(fn, grasps, args.repeats) for k, fn in modes.items()}
         reasons = [project.evaluate(p, q).reason for _, p, q in grasps]
-    ref = results["project (default, hand_root spec)"][1]
+        agreement = []
+        if args.agreement and args.grasps:
+            for oid, p, q in load_grasps(args.grasps, None, Path(tmp)):
+                a, b = project.evaluate(p, q), spec.evaluate(p, q)
+                agreement.append((oid, a.success, b.success, a.reason, b.reason, a.sim_steps > 0))
+    ref = results["project (default, hand_root palm)"][1]
     peer_cpu = statistics.median(results["peer loop (palm-rooted, closing per direction)"][0])
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
@@ -167,6 +177,17 @@ def main(argv=None) -> None:
         lines.append(f"| {k} | {statistics.median(runs):.3f} | {', '.join(f'{r:.3f}' for r in runs)} | "
                      f"{statistics.median(runs) / peer_cpu:.2f} | {sum(verdicts)}/{len(verdicts)} | "
                      f"{agree}/{len(verdicts)} ({100 * agree / len(verdicts):.1f}%) |")
+    if agreement:
+        n = len(agreement)
+        same = sum(a == b for _, a, b, _, _, _ in agreement)
+        same_r = sum(ra == rb for _, _, _, ra, rb, _ in agreement)
+        sim = [x for x in agreement if x[5]]
+        lines += ["", f"## Rooting: hand_root palm (default) against spec, every row ({n} grasps, "
+                      f"{len({x[0] for x in agreement})} objects, {len(sim)} simulated)", "",
+                  f"- success verdict agrees on {same}/{n} ({100 * same / n:.1f}%); among simulated grasps "
+                  f"{sum(a == b for _, a, b, _, _, _ in sim)}/{len(sim)}",
+                  f"- reason code agrees on {same_r}/{n} ({100 * same_r / n:.1f}%)",
+                  f"- successes: palm {sum(x[1] for x in agreement)}, spec {sum(x[2] for x in agreement)}"]
     lines += ["", f"Objects: {', '.join(objects)}.", "",
               f"Total benchmark time: {time.perf_counter() - t_start:.0f} s."]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

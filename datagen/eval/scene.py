@@ -149,6 +149,8 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
 
     hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
     palm = _PalmKinematics(hand) if cfg.hand_root == "palm" else None
+    if palm is not None and palm.palm == hand.spec.root_body:
+        palm = None  # rooted at the palm already (no wrist): the same scene as hand_root spec
     base = spec.worldbody.add_body(name="hand_base")
     base.add_freejoint(name="hand_free")
     # the scene keeps its own solver options and sizes; the hand's user-field sizes are adopted

@@ -15,7 +15,7 @@ import mujoco
 
 def test_palm_scene_puts_every_link_where_the_full_hand_does(shadow, box_dir):
     pieces = box_pieces((0.03, 0.02, 0.03), box_dir)
-    full = build_scene(shadow, pieces, EvalConfig())
+    full = build_scene(shadow, pieces, EvalConfig(hand_root="spec"))
     palm = build_scene(shadow, pieces, EvalConfig(hand_root="palm"))
     held = {n for n in shadow.joint_names if "WRJ" in n}
     assert palm.model.nv == full.model.nv - len(held)  # the wrist dofs are gone
@@ -40,7 +40,7 @@ def test_palm_scene_puts_every_link_where_the_full_hand_does(shadow, box_dir):
 def test_palm_rooted_evaluation_holds_a_constructed_grasp(shadow, box_dir):
     from datagen.eval import Evaluator
 
-    with Evaluator(shadow, EvalConfig()) as full, Evaluator(shadow, EvalConfig(hand_root="palm")) as palm:
+    with Evaluator(shadow, EvalConfig(hand_root="spec")) as full, Evaluator(shadow, EvalConfig(hand_root="palm")) as palm:
         pieces, poses = box_grasp(full, (0.03, 0.015, 0.03), 0.0, box_dir)
         a, b = full.evaluate(pieces, poses), palm.evaluate(pieces, poses)
     assert a.reason == b.reason == "ok"
