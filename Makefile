@@ -72,7 +72,7 @@ hand-specs: $(STAMP) hands
 	gl=$$($(PY) -m datagen.gl) && MUJOCO_GL=$$gl $(PY) -m datagen.hands.make_spec --builtin all --render-dir out/hands
 
 # MuJoCo evaluation (issue 6): seconds per grasp, serial against parallel directions.
-# BENCH_EVAL_ARGS="--grasps GRASPS.parquet" also times the rows of a (synthesized) grasp table.
+# BENCH_EVAL_ARGS="--grasps A.parquet B.parquet --agreement": project vs the peer loop on (synthesized) grasp tables.
 .PHONY: bench-eval
 
 bench-eval: $(STAMP)

@@ -1,31 +1,39 @@
-"""MuJoCo evaluation benchmark -> benchmarks/results/eval.md.
+"""Evaluation cost: the project's evaluator against the peer benchmark's loop, same grasps -> eval.md.
 
-Seconds per grasp of `datagen.eval.Evaluator` on the Shadow hand, for constructed grasps (a box
-against the palm, fingers closed until they touch it: tests/eval/grasps.py; `datagen.synth` is
-not used here), in four modes:
+CPU seconds per grasp (process time, one thread) of, on the same grasps and in one run:
 
-* ``reference``: the public protocol's structure: every direction resets and re-runs the
-  pregrasp -> grasp -> squeeze closing, then holds for the full 2 s (no early stop);
-* ``serial``: the closing simulated once and copied per direction, directions stepped in
-  lockstep in one thread, stop at the first failing check (the default, ``threads=1``);
-* ``threads=2`` / ``threads=6``: the same with the directions stepped on a thread pool;
-* ``no noslip``: serial with ``noslip_iterations=0`` (NOT the protocol: shows what the noslip
-  pass costs; verdicts may differ).
+* ``project, palm``: `datagen.eval.Evaluator` with the default `EvalConfig` (``hand_root:
+  palm``: wrist held, forearm out of the scene; the closing simulated once and copied per
+  direction, directions in lockstep, stop at the first failing check; static metrics and
+  epsilon included);
+* ``project, spec``: the same with ``hand_root: spec`` (the forearm and driven wrist joints);
+* ``peer loop``: a re-implementation of the loop structure of DexGraspBench's ``fcMocapEval``
+  (read, not copied; github.com/JYChen18/DexGraspBench src/task/eval_func/{base,fc_mocap}.py):
+  the hand rooted at the palm (its Shadow MJCF has no forearm), a pregrasp penetration check,
+  then for each of the six directions in turn: reset to the pregrasp, re-simulate the closing
+  pregrasp -> grasp -> squeeze, apply the force and step 10 x 50 steps, checking the object's
+  pose after each 50 and stopping that direction at the first failure; the first failing
+  direction ends the grasp. Same physics constants (the protocol, `EvalConfig`), same scene
+  (palm-rooted, as the default), contact metrics at the grasp pose as its ``_eval_pene_and_contact`` does; no
+  epsilon (its q1 metric is a separate pass).
 
-Wall time and process CPU time (all threads) per grasp, medians of ``--repeats`` runs. CPU
-seconds per grasp is the per-core cost; wall time shows the latency gain of parallel
-directions, bounded by the cores actually free (the machine is shared).
+Each mode runs over all grasps ``--repeats`` times; the figure is the median over the runs of
+the mean CPU seconds per grasp. Verdict agreement (success or not) is reported against the
+project's default evaluator (hand_root palm).
 
-With ``--grasps TABLE`` (a grasp table as `datagen eval` reads, e.g. from `datagen.synth`) its
-rows are timed too, in the serial and threads=2 modes (its objects must be processed already).
+    python -m benchmarks.bench_eval --grasps A.parquet [B.parquet ...] [--limit 64] [--repeats 3] [--agreement]
 
-    python -m benchmarks.bench_eval [--repeats 5] [--grasps GRASPS.parquet]
+``--agreement``: also evaluate every row of the tables (no limit, not timed) under both rootings
+and report how often the verdicts agree (the measured set behind ``hand_root: palm``).
+
+Without ``--grasps`` it uses constructed grasps (a box against the Shadow palm, tests/eval/grasps.py).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -37,171 +45,150 @@ import torch
 from benchmarks.common import machine_description
 from datagen.eval import EvalConfig, Evaluator
 from datagen.eval.config import DIRECTIONS
-from datagen.eval.hold import close_hand, hold, initial_state
+from datagen.eval.hold import close_hand, initial_state
+from datagen.eval.metrics import static_metrics
 from datagen.hands import load_hand
-from tests.eval.grasps import box_grasp
+from datagen.rotation import quat_angle_np
 
 OUT = Path(__file__).parent / "results" / "eval.md"
-BOXES = [((0.03, hy, 0.03), drop) for hy in (0.015, 0.02) for drop in (0.0, 0.015, 0.03)]
 
 
-def reference(ev: Evaluator, pieces, poses) -> list[bool]:
-    """The protocol's structure: per direction reset + closing + full 2 s hold (no early stop)."""
+def peer_loop(ev: Evaluator, pieces, poses) -> bool:
+    """One grasp under the peer's loop structure (module docstring); ``ev`` palm-rooted."""
+    cfg = ev.cfg
     scene, datas = ev.scene(pieces)
-    cfg = EvalConfig.from_dict({**ev.cfg.to_dict(), "stop_at_first_failure": False})
+    static = datas[-1]
+    pre = static_metrics(scene, static, poses[0], touch_distance=cfg.touch_distance_m,
+                         contact_distance=cfg.contact_distance_m)
+    if max(pre.penetration, pre.self_penetration) > cfg.max_pregrasp_penetration_m:
+        return False
+    static_metrics(scene, static, poses[1], touch_distance=cfg.touch_distance_m,
+                   contact_distance=cfg.contact_distance_m)  # its penetration / contact metrics
+    d, m, b = datas[0], scene.model, scene.object_body
     f = cfg.force_per_kg * scene.object_mass
-    out = []
-    for d in DIRECTIONS:
-        closed = datas[-2]
-        initial_state(scene, closed, poses[0])
-        pos0, quat0 = closed.xpos[scene.object_body].copy(), closed.xquat[scene.object_body].copy()
-        close_hand(scene, closed, poses, cfg)
-        w = np.array([[*(f * np.asarray(d)), 0, 0, 0]])
-        r = hold(scene, closed, w, datas[:1], pos0, quat0, cfg)[0]
-        out.append(bool(r.success))
-    return out
+    for direction in DIRECTIONS:
+        initial_state(scene, d, poses[0])
+        pos0, quat0 = d.xpos[b].copy(), d.xquat[b].copy()
+        close_hand(scene, d, poses, cfg)
+        d.xfrc_applied[b] = [*(f * np.asarray(direction)), 0.0, 0.0, 0.0]
+        ok = True
+        for _ in range(cfg.hold_steps // cfg.check_every):
+            mujoco.mj_step(m, d, nstep=cfg.check_every)
+            t = float(np.linalg.norm(d.xpos[b] - pos0))
+            r = float(np.degrees(quat_angle_np(d.xquat[b], quat0)))
+            ok = t < cfg.max_translation_m and r < cfg.max_rotation_deg
+            if not ok:
+                break
+        d.xfrc_applied[b] = 0.0
+        if not ok:
+            return False
+    return True
 
 
-def timed(fn, repeats: int) -> tuple[float, float]:
-    """Median wall and CPU seconds of fn() over ``repeats`` runs (after one warm-up)."""
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeats):
-        w0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - w0)
-        cpu.append(time.process_time() - c0)
-    return statistics.median(wall), statistics.median(cpu)
+def load_grasps(paths: list[str], limit: int | None, tmp: Path) -> list[tuple[str, object, np.ndarray]]:
+    """(object id, pieces, poses (3, 7 + J)) of the tables' rows (spread evenly if ``limit``)."""
+    if not paths:
+        from tests.eval.grasps import box_grasp
 
-
-def table_section(path: Path, repeats: int) -> list[str]:
-    """Per-row timings of a grasp table (serial and threads=2) as markdown lines."""
-    from collections import Counter
-
+        ev = Evaluator(load_hand("shadow"))
+        out = []
+        for hy in (0.015, 0.02):
+            for drop in (0.0, 0.015, 0.03):
+                pieces, poses = box_grasp(ev, (0.03, hy, 0.03), drop, tmp)
+                out.append((f"box {2 * hy * 100:.0f} cm, drop {drop * 100:.1f} cm", pieces, poses))
+        return out
     from datagen.eval.table import read_grasps, row_pieces, row_poses
 
-    table = read_grasps(path)
-    rows = table.to_pylist()
-    base = path.resolve().parent
-    out = {}
-    reasons = Counter()
-    for mode, cfg in (("serial", EvalConfig()), ("threads=2", EvalConfig(threads=2))):
-        evs: dict[str, Evaluator] = {}
-        walls, cpus, ok_walls, ok_cpus = [], [], [], []
-        for row in rows:
-            ev = evs.setdefault(row["hand"], Evaluator(load_hand(row["hand"]), cfg))
-            pieces, poses = row_pieces(row, base), row_poses(row)
-            res = ev.evaluate(pieces, poses, row["task"], w_t=row.get("w_t"))
-            w, c = timed(lambda: ev.evaluate(pieces, poses, row["task"], w_t=row.get("w_t")), repeats)
-            walls.append(w)
-            cpus.append(c)
-            if res.success:
-                ok_walls.append(w)
-                ok_cpus.append(c)
-            if mode == "serial":
-                reasons[res.reason] += 1
-        for ev in evs.values():
-            ev.close()
-        out[mode] = (statistics.mean(walls), statistics.mean(cpus),
-                     statistics.median(ok_walls) if ok_walls else float("nan"),
-                     statistics.median(ok_cpus) if ok_cpus else float("nan"))
-    objects = sorted({r["object_id"] for r in rows})
-    lines = ["", f"## Grasps of a table: {path.name} ({len(rows)} rows, objects {objects}, "
-             f"hands {sorted({r['hand'] for r in rows})})", "",
-             "Verdicts: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) + ".", ""]
-    for mode, (w, c, ow, oc) in out.items():
-        lines.append(f"- {mode}: mean over rows wall {w:.3f} s / CPU {c:.3f} s per grasp; "
-                     f"successful rows median wall {ow:.3f} s / CPU {oc:.3f} s")
-    return lines
+    rows = []
+    for p in paths:
+        base = Path(p).resolve().parent
+        for row in read_grasps(Path(p)).to_pylist():
+            if row["hand"] != "shadow" or row["task"] != "force_closure":
+                continue
+            rows.append((row["object_id"], row_pieces(row, base), row_poses(row)))
+    if limit and len(rows) > limit:
+        rows = [rows[i] for i in np.linspace(0, len(rows) - 1, limit).round().astype(int)]
+    return rows
+
+
+def run_mode(fn, grasps, repeats: int) -> tuple[list[float], list[bool]]:
+    """Per-run mean CPU seconds per grasp (``repeats`` runs, after a warm-up pass that builds the
+    scenes) and the verdicts."""
+    verdicts = [bool(fn(p, q)) for _, p, q in grasps]
+    runs = []
+    for _ in range(repeats):
+        c0 = time.process_time()
+        for _, p, q in grasps:
+            fn(p, q)
+        runs.append((time.process_time() - c0) / len(grasps))
+    return runs, verdicts
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--grasps", nargs="*", default=[], help="grasp tables (Shadow, force_closure rows)")
+    ap.add_argument("--limit", type=int, default=64, help="at most this many rows, spread over the tables")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--agreement", action="store_true", help="verdicts of every row under both rootings")
     ap.add_argument("--out", default=str(OUT))
-    ap.add_argument("--grasps", default=None, help="also time the rows of this grasp table")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     t_start = time.perf_counter()
+    machine = machine_description()
     hand = load_hand("shadow")
-    modes = {"serial": EvalConfig(threads=1), "threads=2": EvalConfig(threads=2), "threads=6": EvalConfig(threads=6),
-             "no noslip": EvalConfig(noslip_iterations=0)}
-    evs = {k: Evaluator(hand, c) for k, c in modes.items()}
-    rows, totals = [], {k: [0.0, 0.0] for k in ["reference", *modes]}
     with tempfile.TemporaryDirectory(prefix="bench-eval-") as tmp:
-        grasps = [box_grasp(evs["serial"], half, drop, Path(tmp)) for half, drop in BOXES]
-        pieces, poses = grasps[0]
-        far = poses.copy()
-        far[:, 1] += 0.5
-        grasps.append((pieces, far))
-        labels = [f"box {2 * h[1] * 100:.0f} cm deep, drop {d * 100:.1f} cm" for h, d in BOXES] + ["hand 50 cm away"]
-        for label, (pieces, poses) in zip(labels, grasps):
-            res = evs["serial"].evaluate(pieces, poses)
-            ref_ok = None
-            if res.sim_steps:
-                ref_ok = reference(evs["serial"], pieces, poses)
-                assert all(ref_ok) == res.success, "the reference and the evaluator disagree"
-            times = {}
-            if res.sim_steps:
-                times["reference"] = timed(lambda: reference(evs["serial"], pieces, poses), args.repeats)
-            verdicts = {}
-            for k, ev in evs.items():
-                times[k] = timed(lambda ev=ev: ev.evaluate(pieces, poses), args.repeats)
-                verdicts[k] = ev.evaluate(pieces, poses).reason
-            assert verdicts["threads=2"] == verdicts["threads=6"] == res.reason, verdicts
-            for k, (w, c) in times.items():
-                totals[k][0] += w
-                totals[k][1] += c
-            rows.append((label, res, times, verdicts["no noslip"]))
-    for ev in evs.values():
-        ev.close()
+        grasps = load_grasps(args.grasps, args.limit, Path(tmp))
+        project = Evaluator(hand, EvalConfig(hand_root="palm"))
+        spec = Evaluator(hand, EvalConfig(hand_root="spec"))
+        peer = Evaluator(hand, EvalConfig(hand_root="palm"))
+        modes = {"project (default, hand_root palm)": lambda p, q: project.evaluate(p, q).success,
+                 "project, hand_root spec": lambda p, q: spec.evaluate(p, q).success,
+                 "peer loop (palm-rooted, closing per direction)": lambda p, q: peer_loop(peer, p, q)}
+        results = {k: run_mode(fn, grasps, args.repeats) for k, fn in modes.items()}
+        reasons = [project.evaluate(p, q).reason for _, p, q in grasps]
+        agreement = []
+        if args.agreement and args.grasps:
+            for oid, p, q in load_grasps(args.grasps, None, Path(tmp)):
+                a, b = project.evaluate(p, q), spec.evaluate(p, q)
+                agreement.append((oid, a.success, b.success, a.reason, b.reason, a.sim_steps > 0))
+    ref = results["project (default, hand_root palm)"][1]
+    peer_cpu = statistics.median(results["peer loop (palm-rooted, closing per direction)"][0])
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        commit = "?"
+    from collections import Counter
 
-    # step cost of the hold phase alone
-    scene, datas = evs["serial"].scene(grasps[0][0])
-    d = datas[0]
-    initial_state(scene, d, grasps[0][1][0])
-    close_hand(scene, d, grasps[0][1], evs["serial"].cfg)
-    t0 = time.process_time()
-    mujoco.mj_step(scene.model, d, nstep=1000)
-    step_us = (time.process_time() - t0) * 1e3
-
-    def fmt(t):
-        return f"{t[0]:.3f} / {t[1]:.3f}" if t else "-"
-
-    lines = ["# Evaluation benchmark (MuJoCo six-direction hold test)", "",
-             f"Machine: {machine_description()}; mujoco {mujoco.__version__}.", "",
-             "Generated by `make bench-eval` (benchmarks/bench_eval.py). Grasps: **constructed** ones (Shadow "
-             "hand, a box of 6 x 3-4 x 6 cm against the palm, fingers closed until they touch it; "
-             "tests/eval/grasps.py), not synthesized ones. Protocol defaults (EvalConfig()). "
-             f"Each cell: median wall s / median CPU s (all threads) per grasp over {args.repeats} runs. "
-             "The machine is shared with other jobs (2 cores): wall times of the threaded modes are "
-             "bounded by the cores actually free.", "",
-             "| grasp | verdict | sim steps | reference | serial | threads=2 | threads=6 | no noslip (verdict) |",
-             "|---|---|---|---|---|---|---|---|"]
-    for label, res, times, v0 in rows:
-        lines.append(f"| {label} | {res.reason} | {res.sim_steps} | {fmt(times.get('reference'))} | "
-                     f"{fmt(times['serial'])} | {fmt(times['threads=2'])} | {fmt(times['threads=6'])} | "
-                     f"{fmt(times['no noslip'])} ({v0}) |")
-    n_sim = sum(1 for _, r, _, _ in rows if r.sim_steps)
-    passing = [t for _, r, t, _ in rows if r.success]
-    lines += ["", "Summary (seconds per grasp):", ""]
-    for k in ["reference", *modes]:
-        sel = [t[k] for t in passing if k in t]
-        w = statistics.median(x[0] for x in sel) if sel else float("nan")
-        c = statistics.median(x[1] for x in sel) if sel else float("nan")
-        n = n_sim if k == "reference" else len(rows)
-        lines.append(f"- {k}: passing grasps (all 3200 steps) median wall {w:.3f} s, CPU {c:.3f} s per grasp; "
-                     f"mean over all {n} grasps measured: wall {totals[k][0] / n:.3f} s, "
-                     f"CPU {totals[k][1] / n:.3f} s")
-    if args.grasps:
-        lines += table_section(Path(args.grasps), args.repeats)
-    lines += ["", f"Hold-phase step cost (grasped box, serial): {step_us:.0f} us CPU per mj_step "
-              f"({1e6 / step_us:.0f} steps/s).",
-              "Reference structure = 6 x (200 closing + 500 hold) = 4200 steps per passing grasp; ours = "
-              "200 + 6 x 500 = 3200, and a failing grasp stops at the first failing check.", "",
-              "Threads: `mj_step` releases the GIL (checked: a Python loop keeps running during one long "
-              "`mj_step` call), so directions do run concurrently when cores are free; on this shared "
-              "2-core machine (load average above) the threaded wall times show how much was free.", "",
+    objects = sorted({g[0] for g in grasps})
+    lines = ["# Evaluation cost: the project's evaluator against the peer's loop (same grasps)", "",
+             f"Machine: {machine}; mujoco {mujoco.__version__}; commit {commit}.", "",
+             "Generated by `make bench-eval` (benchmarks/bench_eval.py; the modes are described in its docstring). "
+             f"{len(grasps)} Shadow grasps on {len(objects)} objects"
+             + (f" from {', '.join(Path(p).name for p in args.grasps)}" if args.grasps else " (constructed box grasps)")
+             + f"; project verdicts: {', '.join(f'{k} {v}' for k, v in Counter(reasons).most_common())}. "
+             f"CPU seconds per grasp (process time, one thread): median over {args.repeats} runs of the mean "
+             "over the grasps (a warm-up pass builds the scenes first). The machine is shared (2 cores, other "
+             "jobs running): CPU time, not wall time, is the figure.", "",
+             "| mode | CPU s per grasp (median) | runs | x peer | successes | success verdict agrees with project |",
+             "|---|---|---|---|---|---|"]
+    for k, (runs, verdicts) in results.items():
+        agree = sum(a == b for a, b in zip(verdicts, ref))
+        lines.append(f"| {k} | {statistics.median(runs):.3f} | {', '.join(f'{r:.3f}' for r in runs)} | "
+                     f"{statistics.median(runs) / peer_cpu:.2f} | {sum(verdicts)}/{len(verdicts)} | "
+                     f"{agree}/{len(verdicts)} ({100 * agree / len(verdicts):.1f}%) |")
+    if agreement:
+        n = len(agreement)
+        same = sum(a == b for _, a, b, _, _, _ in agreement)
+        same_r = sum(ra == rb for _, _, _, ra, rb, _ in agreement)
+        sim = [x for x in agreement if x[5]]
+        lines += ["", f"## Rooting: hand_root palm (default) against spec, every row ({n} grasps, "
+                      f"{len({x[0] for x in agreement})} objects, {len(sim)} simulated)", "",
+                  f"- success verdict agrees on {same}/{n} ({100 * same / n:.1f}%); among simulated grasps "
+                  f"{sum(a == b for _, a, b, _, _, _ in sim)}/{len(sim)}",
+                  f"- reason code agrees on {same_r}/{n} ({100 * same_r / n:.1f}%)",
+                  f"- successes: palm {sum(x[1] for x in agreement)}, spec {sum(x[2] for x in agreement)}"]
+    lines += ["", f"Objects: {', '.join(objects)}.", "",
               f"Total benchmark time: {time.perf_counter() - t_start:.0f} s."]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

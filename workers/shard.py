@@ -244,7 +244,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     for e, p, rel in ready:
         try:
             # the SDF and its grid are in normalized units: build them once, rescale the hull samples
-            base = GraspTarget.from_processed(p, e.scales[0], grid_resolution=cfg.grid_resolution)
+            base = GraspTarget.from_processed(p, e.scales[0], grid_resolution=cfg.grid_resolution, cache=cache)
         except Exception as exc:  # noqa: BLE001
             _failure(fails, index, e.id, "target", "error", f"{e.id}: {type(exc).__name__}: {exc}")
             continue

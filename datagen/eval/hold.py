@@ -45,6 +45,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
 
 
 def _set_targets(scene: Scene, data: mujoco.MjData, pos: np.ndarray, quat: np.ndarray, joints: np.ndarray) -> None:
+    pos, quat = scene.root_target(pos, quat, joints)
     data.mocap_pos[scene.mocap] = pos
     data.mocap_quat[scene.mocap] = quat
     data.ctrl[scene.actuators] = scene.ctrl(joints)
@@ -55,9 +56,10 @@ def initial_state(scene: Scene, data: mujoco.MjData, pregrasp: np.ndarray) -> No
     m = scene.model
     mujoco.mj_resetData(m, data)
     q = pregrasp[3:7] / np.linalg.norm(pregrasp[3:7])
-    data.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = pregrasp[:3]
-    data.qpos[scene.hand_free_qpos + 3:scene.hand_free_qpos + 7] = q
-    data.qpos[scene.hand_qpos_adr] = pregrasp[7:]
+    pos, quat = scene.root_target(pregrasp[:3], q, pregrasp[7:])
+    data.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = pos
+    data.qpos[scene.hand_free_qpos + 3:scene.hand_free_qpos + 7] = quat
+    data.qpos[scene.hand_qpos_adr] = scene.hand_joints(pregrasp[7:])
     _set_targets(scene, data, pregrasp[:3], q, pregrasp[7:])
     mujoco.mj_forward(m, data)
 

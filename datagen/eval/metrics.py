@@ -33,12 +33,13 @@ def set_static_pose(scene: Scene, data: mujoco.MjData, row: np.ndarray) -> None:
     pose, and compute the kinematics (geom poses) only."""
     m = scene.model
     data.qpos[:] = m.qpos0
-    data.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = row[:3]
     q = np.asarray(row[3:7], dtype=np.float64)
-    data.qpos[scene.hand_free_qpos + 3:scene.hand_free_qpos + 7] = q / np.linalg.norm(q)
-    data.qpos[scene.hand_qpos_adr] = row[7:]
-    data.mocap_pos[scene.mocap] = row[:3]
-    data.mocap_quat[scene.mocap] = q / np.linalg.norm(q)
+    pos, q = scene.root_target(row[:3], q / np.linalg.norm(q), row[7:])
+    data.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = pos
+    data.qpos[scene.hand_free_qpos + 3:scene.hand_free_qpos + 7] = q
+    data.qpos[scene.hand_qpos_adr] = scene.hand_joints(row[7:])
+    data.mocap_pos[scene.mocap] = pos
+    data.mocap_quat[scene.mocap] = q
     mujoco.mj_kinematics(m, data)
 
 

@@ -7,11 +7,19 @@ The object is one body of the convex pieces at ``scale`` metres per normalized u
 mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
 hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's
 condim, friction and margin; hand geoms get the hand solimp/solref.
+
+Rooting (``EvalConfig.hand_root``): ``"spec"`` attaches the hand from its spec's root body (for
+the Shadow hands: the forearm, its 3-4 kg driven through the two wrist joints by the actuators).
+``"palm"`` attaches only the palm (the lowest common ancestor of the fingertip links) and what
+hangs from it, the way the peer benchmark roots the hand: the joints between the root and the
+palm (the wrist) are held at the row's values, i.e. the mocap target is the palm's pose computed
+from the row's root pose and wrist angles (``Scene.root_target``, MuJoCo's own kinematics of the
+hand MJCF); the forearm's geoms and the wrist actuators are not in the scene.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
@@ -90,10 +98,26 @@ class Scene:
     hand_geom_link: np.ndarray       # (G,) index into hand.link_names of each hand geom's body
     object_geoms: np.ndarray         # (P,) object geom ids
     self_pairs: np.ndarray | None = None  # (S, 2) hand geom pairs of the self-penetration metric (lazy)
+    # hand_root "palm": the joints of the row the scene simulates (J',) (None: all J), and the
+    # kinematics of the palm relative to the row's root (see ``root_target``)
+    sim_joints: np.ndarray | None = None
+    palm_kinematics: "_PalmKinematics | None" = field(default=None, repr=False)
 
     @property
     def object_mass(self) -> float:
         return float(self.model.body_subtreemass[self.object_body])
+
+    def hand_joints(self, joints: np.ndarray) -> np.ndarray:
+        """(J',) the values of the simulated joints among a row's joints (J,)."""
+        return joints if self.sim_joints is None else joints[self.sim_joints]
+
+    def root_target(self, pos: np.ndarray, quat: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (3,), (4,) [w x y z] of the scene's hand base (welded to the mocap body) for a
+        row's root pose and joints (J,): the row's root itself, or for ``hand_root: palm`` the
+        palm's pose with the wrist joints at the row's values."""
+        if self.palm_kinematics is None:
+            return pos, quat
+        return self.palm_kinematics.palm_pose(pos, quat, joints)
 
     def ctrl(self, joints: np.ndarray) -> np.ndarray:
         """(nu,) actuator targets for joints (J,) radians, clipped to the control range."""
@@ -124,6 +148,9 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     spec.compiler.degree = False
 
     hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
+    palm = _PalmKinematics(hand) if cfg.hand_root == "palm" else None
+    if palm is not None and palm.palm == hand.spec.root_body:
+        palm = None  # rooted at the palm already (no wrist): the same scene as hand_root spec
     base = spec.worldbody.add_body(name="hand_base")
     base.add_freejoint(name="hand_free")
     # the scene keeps its own solver options and sizes; the hand's user-field sizes are adopted
@@ -134,7 +161,21 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     for k in ("nuser_jnt", "nuser_site", "nuser_tendon", "nuser_actuator", "nuser_sensor", "nuser_body",
               "nuser_geom", "nuser_cam"):
         setattr(spec, k, getattr(hand_spec, k))
-    base.add_frame().attach_body(hand_spec.body(hand.spec.root_body), HAND_PREFIX, "")
+    if palm is None:
+        base.add_frame().attach_body(hand_spec.body(hand.spec.root_body), HAND_PREFIX, "")
+    else:  # the palm's subtree, its frame at the hand base; the wrist joints and actuators dropped
+        body = base.add_frame().attach_body(hand_spec.body(palm.palm), HAND_PREFIX, "")
+        body.pos, body.quat = [0, 0, 0], [1, 0, 0, 0]
+        held = {HAND_PREFIX + n for n in palm.held_names}
+        for j in list(body.joints):
+            spec.delete(j)
+        held |= {HAND_PREFIX + n for n in palm.held_tendons}
+        for a in [a for a in spec.actuators if a.target in held]:
+            spec.delete(a)
+        for t in [t for t in spec.tendons if t.name in held]:
+            spec.delete(t)
+        for x in [x for x in spec.sensors if x.objname in held]:
+            spec.delete(x)
     spec.worldbody.add_body(name="hand_mocap", mocap=True)
     weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                              name1="hand_mocap", name2="hand_base")
@@ -187,15 +228,86 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     except Exception as exc:
         raise EvalError(f"scene of hand {hand.name!r} and object {pieces.object_id!r}",
                         f"MuJoCo cannot compile it: {str(exc).strip()}") from None
-    return _index(model, hand, pieces, "free" if task is None else task.joint)
+    return _index(model, hand, pieces, "free" if task is None else task.joint, palm)
 
 
-def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str) -> Scene:
+class _PalmKinematics:
+    """The palm's pose relative to the hand's root for given wrist angles (hand_root: palm).
+
+    ``palm``: the lowest common ancestor of the fingertip links; ``held_names``: the joints on
+    the path from the root body to the palm (the palm's own included). Uses MuJoCo's kinematics
+    of the hand MJCF alone (``mj_kinematics``)."""
+
+    def __init__(self, hand) -> None:
+        self.model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+
+        def chain(b: int) -> list[int]:
+            out = [b]
+            while b != 0:
+                b = int(m.body_parentid[b])
+                out.append(b)
+            return out[::-1]
+
+        tips = [chain(m.body(t.link).id) for t in hand.spec.fingertips.values()]
+        lca = 0
+        for level in zip(*tips):
+            if len(set(level)) != 1:
+                break
+            lca = level[0]
+        root = m.body(hand.spec.root_body).id
+        path = chain(lca)
+        if root not in path:
+            raise EvalError(f"hand {hand.name!r}", "hand_root: palm needs the palm below the root body")
+        path = path[path.index(root):]
+        self.palm = m.body(lca).name
+        self.parent = int(m.body_parentid[root])
+        held = [j for b in path for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b])]
+        if any(int(m.jnt_type[j]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)) for j in held):
+            raise EvalError(f"hand {hand.name!r}", "hand_root: palm handles hinge and slide wrist joints only")
+        self.held_names = [m.joint(j).name for j in held]
+        wraps = [(t, m.wrap_objid[w]) for t in range(m.ntendon)
+                 for w in range(m.tendon_adr[t], m.tendon_adr[t] + m.tendon_num[t])
+                 if int(m.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT)]
+        self.held_tendons = sorted({m.tendon(t).name for t, j in wraps if j in held})
+        index = {n: i for i, n in enumerate(hand.joint_names)}
+        self.held_index = np.array([index[n] for n in self.held_names], dtype=np.int64)
+        self.held_qadr = np.array([m.jnt_qposadr[j] for j in held], dtype=np.int64)
+        self.lca = lca
+
+    def palm_pose(self, pos: np.ndarray, quat: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World pose of the palm for the root at (pos, quat [w x y z]) and joints (J,)."""
+        m, d = self.model, self.data
+        d.qpos[:] = m.qpos0
+        d.qpos[self.held_qadr] = np.asarray(joints)[self.held_index]
+        mujoco.mj_kinematics(m, d)
+        # the palm in the frame of the root body's parent (which the scene puts at the row's root)
+        pq = np.empty(4)
+        mujoco.mju_negQuat(pq, d.xquat[self.parent])
+        rel_p = np.empty(3)
+        mujoco.mju_rotVecQuat(rel_p, d.xpos[self.lca] - d.xpos[self.parent], pq)
+        rel_q = np.empty(4)
+        mujoco.mju_mulQuat(rel_q, pq, d.xquat[self.lca])
+        q = np.asarray(quat, dtype=np.float64)
+        q = q / np.linalg.norm(q)
+        out_p = np.empty(3)
+        mujoco.mju_rotVecQuat(out_p, rel_p, q)
+        out_q = np.empty(4)
+        mujoco.mju_mulQuat(out_q, q, rel_q)
+        return np.asarray(pos, dtype=np.float64) + out_p, out_q
+
+
+def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str, palm: _PalmKinematics | None = None) -> Scene:
     J = hand.num_joints
-    qadr = np.array([model.jnt_qposadr[model.joint(HAND_PREFIX + n).id] for n in hand.joint_names])
+    held = set() if palm is None else set(palm.held_names)
+    sim = np.array([j for j, n in enumerate(hand.joint_names) if n not in held], dtype=np.int64)
+    qadr = np.array([model.jnt_qposadr[model.joint(HAND_PREFIX + hand.joint_names[j]).id] for j in sim])
     free = model.joint("hand_free").id
     oj = model.joint("object_joint").id
-    acts = np.array([model.actuator(HAND_PREFIX + n).id for n in hand.actuator_names], dtype=np.int64)
+    names = [n for n in hand.actuator_names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, HAND_PREFIX + n) >= 0]
+    kept = np.array([i for i, n in enumerate(hand.actuator_names) if n in set(names)], dtype=np.int64)
+    acts = np.array([model.actuator(HAND_PREFIX + n).id for n in names], dtype=np.int64)
     link_index = {HAND_PREFIX + n: i for i, n in enumerate(hand.link_names)}
     hand_geoms, hand_link = [], []
     obody = model.body("object").id
@@ -205,7 +317,9 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str) -> Sce
             hand_geoms.append(g)
             hand_link.append(link_index[b])
     obj_geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] == obody])
-    A = hand.ctrl_matrix.detach().cpu().double().numpy()
+    A = hand.ctrl_matrix.detach().cpu().double().numpy()[kept]
+    if palm is not None and np.any(A[:, palm.held_index]):
+        raise EvalError(f"hand {hand.name!r}", "an actuator couples a wrist joint to a finger; hand_root: palm cannot hold it")
     if A.shape != (len(acts), J):
         raise EvalError(f"hand {hand.name!r}", f"control matrix {A.shape} does not match {len(acts)} actuators")
     return Scene(model=model, hand=hand, objects=pieces, joint=joint, hand_qpos_adr=qadr,
@@ -213,4 +327,5 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str) -> Sce
                  object_qpos=int(model.jnt_qposadr[oj]), object_dof=int(model.jnt_dofadr[oj]),
                  object_body=obody, mocap=int(model.body_mocapid[model.body("hand_mocap").id]),
                  actuators=acts, ctrl_matrix=A, ctrl_range=model.actuator_ctrlrange[acts].copy(),
-                 hand_geoms=np.array(hand_geoms), hand_geom_link=np.array(hand_link), object_geoms=obj_geoms)
+                 hand_geoms=np.array(hand_geoms), hand_geom_link=np.array(hand_link), object_geoms=obj_geoms,
+                 sim_joints=None if palm is None else sim, palm_kinematics=palm)

@@ -190,6 +190,39 @@ class MeshSDF:
         self.cell_size = torch.as_tensor(size, dtype=self.vertices.dtype, device=dev)
         self.res = res
 
+    def candidate_grid(self) -> dict | None:
+        """The culling grid as compact CPU arrays (for caching it; None without one): ``counts``
+        (R^3,) candidates per cell, ``cand`` (N,) int32 the first min(count, K) candidates of
+        every cell in order, ``lo`` / ``cell_size`` (3,) mesh units, ``res`` and ``max_candidates`` K.
+        :meth:`set_candidate_grid` restores the same grid exactly."""
+        if self.cells is None:
+            return None
+        counts = self.counts.cpu()
+        n = counts.clamp_max(self.cells.shape[1])
+        mask = torch.arange(self.cells.shape[1])[None] < n[:, None]
+        return {"counts": counts.numpy().astype(np.int32), "cand": self.cells.cpu()[mask].numpy().astype(np.int32),
+                "lo": self.lo.cpu().numpy(), "cell_size": self.cell_size.cpu().numpy(),
+                "res": int(self.res), "max_candidates": int(self.cells.shape[1])}
+
+    def set_candidate_grid(self, g: dict) -> None:
+        """Install a culling grid from :meth:`candidate_grid`'s arrays (the rest of each cell's
+        row repeats its nearest candidate, as the builder leaves it)."""
+        res, k = int(g["res"]), int(g["max_candidates"])
+        counts = torch.as_tensor(np.asarray(g["counts"]), dtype=torch.long)
+        n = counts.clamp_max(k)
+        if len(counts) != res ** 3 or int(n.sum()) != len(g["cand"]) or bool((n < 1).any()):
+            raise ValueError("MeshSDF.set_candidate_grid: counts and candidates do not match")
+        cand = torch.as_tensor(np.asarray(g["cand"]), dtype=torch.long)
+        first = cand[torch.cumsum(n, 0) - n]
+        cells = first[:, None].repeat(1, k)
+        cells[torch.arange(k)[None] < n[:, None]] = cand
+        dev = self.vertices.device
+        self.cells, self.counts = cells.to(dev), counts.to(dev)
+        self.overflow = self.counts > k
+        self.lo = torch.as_tensor(np.asarray(g["lo"]), dtype=self.vertices.dtype, device=dev)
+        self.cell_size = torch.as_tensor(np.asarray(g["cell_size"]), dtype=self.vertices.dtype, device=dev)
+        self.res = res
+
     def nearest_faces(self, p: torch.Tensor) -> torch.Tensor:
         """Exact nearest triangle index for points p (N, 3) metres."""
         if self.cells is None:

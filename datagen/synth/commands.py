@@ -29,7 +29,7 @@ def load_target(path: str | Path, scale: float, cache: str | None = None, proces
         raise FileNotFoundError(f"object {p} is neither a mesh file nor a processed-object directory")
     if not processed.ok:
         raise ValueError(f"object {p}: processing failed ({processed.reason}): {processed.message}")
-    return GraspTarget.from_processed(processed, scale)
+    return GraspTarget.from_processed(processed, scale, cache=cache)  # SDF grid: cached beside the objects
 
 
 def register_synth(sub: argparse._SubParsersAction) -> None:

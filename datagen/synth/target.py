@@ -9,6 +9,7 @@ import numpy as np
 import torch
 import trimesh
 
+from datagen.objects import grid_cache
 from datagen.objects.grid_sdf import GridSDF
 from datagen.objects.sdf import MeshSDF, SDFResult
 
@@ -36,12 +37,23 @@ class GraspTarget:
     @classmethod
     def from_mesh(cls, mesh: trimesh.Trimesh, scale: float, object_id: str, *, object_path: str = "",
                   mesh_sha256: str = "", hull_samples: int = 2048, seed: int = 0,
-                  grid_resolution: int = 64) -> "GraspTarget":
-        """From a mesh in normalized units (``scale`` metres per unit)."""
+                  grid_resolution: int = 64, cache_grid: bool = False,
+                  cache: str | Path | None = None) -> "GraspTarget":
+        """From a mesh in normalized units (``scale`` metres per unit).
+
+        ``cache_grid``: take the SDF grid and the exact SDF's culling grid from (or store them in)
+        the grid cache under the objects cache root ``cache`` (None: ``$DATAGEN_CACHE``), see
+        :mod:`datagen.objects.grid_cache`; both are in normalized units, so one serves every scale.
+        """
         if not scale > 0:
             raise ValueError(f"{object_id}: scale must be > 0 metres, got {scale}")
-        sdf = MeshSDF(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        grid = GridSDF.from_mesh(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed, exact=sdf)
+        if cache_grid:
+            sdf, _ = grid_cache.load_or_build_mesh_sdf(np.asarray(mesh.vertices), np.asarray(mesh.faces), root=cache)
+            grid, _ = grid_cache.load_or_build(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed,
+                                               root=cache, exact=sdf)
+        else:
+            sdf = MeshSDF(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+            grid = GridSDF.from_mesh(mesh.vertices, mesh.faces, resolution=grid_resolution, seed=seed, exact=sdf)
         hull = mesh.convex_hull
         pts, faces = trimesh.sample.sample_surface_even(hull, hull_samples, seed=seed)
         if len(pts) < 16:  # sample_surface_even can return few points on tiny hulls
@@ -52,13 +64,17 @@ class GraspTarget:
                    object_path=object_path, mesh_sha256=mesh_sha256, grid=grid)
 
     @classmethod
-    def from_processed(cls, processed, scale: float, **kw) -> "GraspTarget":
-        """From a :class:`datagen.objects.process.ProcessedObject` (its watertight surface)."""
+    def from_processed(cls, processed, scale: float, *, cache_grid: bool = True, **kw) -> "GraspTarget":
+        """From a :class:`datagen.objects.process.ProcessedObject` (its watertight surface).
+
+        The SDF grid comes from the grid cache (built and stored on a miss) unless
+        ``cache_grid=False``; ``cache=`` names the objects cache root (default ``$DATAGEN_CACHE``).
+        """
         if not processed.ok:
             raise ValueError(f"{processed.object_id}: object failed processing ({processed.reason}): {processed.message}")
         mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
         return cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
-                             mesh_sha256=processed.mesh_sha256, **kw)
+                             mesh_sha256=processed.mesh_sha256, cache_grid=cache_grid, **kw)
 
     def query(self, points: torch.Tensor) -> SDFResult:
         """Signed distance (m, < 0 inside), closest point (m), outward normal for ``(..., 3)`` m."""

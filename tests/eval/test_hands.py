@@ -56,10 +56,12 @@ def test_fingers_reach_a_step_target_within_a_protocol_phase(name, box_dir):
         d = mujoco.MjData(m)
         q0 = hand.open_pose.numpy()
         d.qpos[scene.hand_free_qpos:scene.hand_free_qpos + 3] = d.mocap_pos[scene.mocap] = [0.5, 0.5, 0.5]
-        d.qpos[scene.hand_qpos_adr] = q0
-        j = int(np.argmax(hand.joint_upper.numpy() - q0))  # the joint with the most room to flex
+        d.qpos[scene.hand_qpos_adr] = scene.hand_joints(q0)  # the simulated joints (a held wrist is not)
+        sim = np.arange(hand.num_joints) if scene.sim_joints is None else scene.sim_joints
+        k = int(np.argmax((hand.joint_upper.numpy() - q0)[sim]))  # the joint with the most room to flex
+        j = int(sim[k])
         target = q0.copy()
         target[j] += 0.3
         d.ctrl[scene.actuators] = scene.ctrl(target)
         mujoco.mj_step(m, d, nstep=100)  # 0.4 s at 4 ms
-        assert d.qpos[scene.hand_qpos_adr[j]] - q0[j] > 0.27, (name, hand.joint_names[j])
+        assert d.qpos[scene.hand_qpos_adr[k]] - q0[j] > 0.27, (name, hand.joint_names[j])
