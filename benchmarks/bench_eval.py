@@ -2,11 +2,11 @@
 
 CPU seconds per grasp (process time, one thread) of, on the same grasps and in one run:
 
-* ``project, palm``: `datagen.eval.Evaluator` with the default `EvalConfig` (``hand_root:
-  palm``: wrist held, forearm out of the scene; the closing simulated once and copied per
+* ``project, palm``: `datagen.eval.Evaluator` with ``hand_root: palm`` (wrist held, forearm out of the scene; the closing simulated once and copied per
   direction, directions in lockstep, stop at the first failing check; static metrics and
   epsilon included);
-* ``project, spec``: the same with ``hand_root: spec`` (the forearm and driven wrist joints);
+* ``project, spec``: the same with ``hand_root: spec``, the default (the forearm and driven wrist
+  joints);
 * ``peer loop``: a re-implementation of the loop structure of DexGraspBench's ``fcMocapEval``
   (read, not copied; github.com/JYChen18/DexGraspBench src/task/eval_func/{base,fc_mocap}.py):
   the hand rooted at the palm (its Shadow MJCF has no forearm), a pregrasp penetration check,
@@ -14,12 +14,12 @@ CPU seconds per grasp (process time, one thread) of, on the same grasps and in o
   pregrasp -> grasp -> squeeze, apply the force and step 10 x 50 steps, checking the object's
   pose after each 50 and stopping that direction at the first failure; the first failing
   direction ends the grasp. Same physics constants (the protocol, `EvalConfig`), same scene
-  (palm-rooted, as the default), contact metrics at the grasp pose as its ``_eval_pene_and_contact`` does; no
+  (palm-rooted), contact metrics at the grasp pose as its ``_eval_pene_and_contact`` does; no
   epsilon (its q1 metric is a separate pass).
 
 Each mode runs over all grasps ``--repeats`` times; the figure is the median over the runs of
 the mean CPU seconds per grasp. Verdict agreement (success or not) is reported against the
-project's default evaluator (hand_root palm).
+project's palm-rooted evaluator (the peer's rooting).
 
     python -m benchmarks.bench_eval --grasps A.parquet [B.parquet ...] [--limit 64] [--repeats 3] [--agreement]
 
@@ -141,8 +141,8 @@ def main(argv=None) -> None:
         project = Evaluator(hand, EvalConfig(hand_root="palm"))
         spec = Evaluator(hand, EvalConfig(hand_root="spec"))
         peer = Evaluator(hand, EvalConfig(hand_root="palm"))
-        modes = {"project (default, hand_root palm)": lambda p, q: project.evaluate(p, q).success,
-                 "project, hand_root spec": lambda p, q: spec.evaluate(p, q).success,
+        modes = {"project, hand_root palm": lambda p, q: project.evaluate(p, q).success,
+                 "project (default), hand_root spec": lambda p, q: spec.evaluate(p, q).success,
                  "peer loop (palm-rooted, closing per direction)": lambda p, q: peer_loop(peer, p, q)}
         results = {k: run_mode(fn, grasps, args.repeats) for k, fn in modes.items()}
         reasons = [project.evaluate(p, q).reason for _, p, q in grasps]
@@ -151,7 +151,7 @@ def main(argv=None) -> None:
             for oid, p, q in load_grasps(args.grasps, None, Path(tmp)):
                 a, b = project.evaluate(p, q), spec.evaluate(p, q)
                 agreement.append((oid, a.success, b.success, a.reason, b.reason, a.sim_steps > 0))
-    ref = results["project (default, hand_root palm)"][1]
+    ref = results["project, hand_root palm"][1]
     peer_cpu = statistics.median(results["peer loop (palm-rooted, closing per direction)"][0])
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
