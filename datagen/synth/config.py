@@ -64,7 +64,7 @@ class SynthConfig(Config):
     sphere_margin_m: float = 0.0015  #: spheres overshoot the hand's collision shapes (<= 2.8 mm): they may sink this far
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
-    seed_select_iter: int = 80  #: iterations every seed runs before the best seed of each grasp is kept
+    seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     seed: int = 0
 
