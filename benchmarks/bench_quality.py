@@ -159,7 +159,7 @@ def _notes(path: Path) -> list[str]:
     if "## Notes" not in text:
         return []
     notes = text[text.index("## Notes"):]
-    return [x for x in notes if not x.startswith("quality: ")]
+    return [x for x in notes if not x.startswith(("quality: ", "Headline: "))]
 
 
 if __name__ == "__main__":
