@@ -31,7 +31,7 @@ class EnergyWeights(Config):
 
 #: seeds per grasp of force-closure synthesis by default (``datagen synth`` and the job default):
 #: the best of 8 starts (by the whole hand's epsilon) raised six-direction success on the
-#: real-object set from 38% to 72% (Shadow, 224 grasps; benchmarks/results/quality.md)
+#: real-object set from 38% to 73% (Shadow, default scales; benchmarks/results/quality.md)
 FORCE_CLOSURE_SEEDS = 8
 
 
