@@ -38,12 +38,18 @@ def _wait_for(pred, timeout_s: float, what: str):
         time.sleep(0.2)
 
 
-def test_sigkilled_driver_resumes_to_the_same_rows(tmp_path, mesh_source, cache_dir, reference):
+def _run_command(tmp_path, mesh_source, cache_dir):
+    """The tiny job's config, its directory and the `datagen run` command line (one CPU)."""
     cfg = tiny_config(mesh_source)
     out = tmp_path / "job"
     (tmp_path / "job.yaml").write_text(yaml.safe_dump(cfg.to_dict()))
     cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--config", str(tmp_path / "job.yaml"),
            "--num-cpus", "1", "--cache", cache_dir, "--no-progress"]
+    return cfg, out, cmd
+
+
+def test_sigkilled_driver_resumes_to_the_same_rows(tmp_path, mesh_source, cache_dir, reference):
+    cfg, out, cmd = _run_command(tmp_path, mesh_source, cache_dir)
     proc = subprocess.Popen(cmd, cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     try:
@@ -72,11 +78,7 @@ def test_sigkilled_driver_resumes_to_the_same_rows(tmp_path, mesh_source, cache_
 
 
 def test_ctrl_c_abandons_running_shards_cleanly(tmp_path, mesh_source, cache_dir, reference):
-    cfg = tiny_config(mesh_source)
-    out = tmp_path / "job"
-    (tmp_path / "job.yaml").write_text(yaml.safe_dump(cfg.to_dict()))
-    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--config", str(tmp_path / "job.yaml"),
-           "--num-cpus", "1", "--cache", cache_dir, "--no-progress"]
+    cfg, out, cmd = _run_command(tmp_path, mesh_source, cache_dir)
     # SIGINT as a terminal's Ctrl-C sends it: to the whole process group (default disposition, even
     # when this test runs in a background shell that ignores SIGINT)
     proc = subprocess.Popen(cmd, cwd=REPO, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
