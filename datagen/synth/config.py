@@ -81,7 +81,8 @@ class SynthConfig(Config):
         if self.contact_model not in ("pcf", "sfc") or self.torsional_mu < 0:
             raise ConfigError(f"SynthConfig.contact_model must be 'pcf' or 'sfc' and torsional_mu >= 0, "
                               f"got {self.contact_model!r}, {self.torsional_mu}")
-        if self.squeeze_mode not in ("force", "normal", "joint"):
-            raise ConfigError(f"SynthConfig.squeeze_mode must be 'force', 'normal' or 'joint', got {self.squeeze_mode!r}")
+        if self.squeeze_mode not in ("hand", "force", "normal", "joint"):
+            raise ConfigError(f"SynthConfig.squeeze_mode must be 'hand', 'force', 'normal' or 'joint', "
+                              f"got {self.squeeze_mode!r}")
         if not self.mu > 0:
             raise ConfigError(f"SynthConfig.mu must be > 0, got {self.mu}")

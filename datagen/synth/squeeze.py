@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "joint_squeeze", "normal_squeeze",
-           "pregrasp_and_squeeze", "tip_jacobian"]
+__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "hand_squeeze", "joint_squeeze",
+           "normal_squeeze", "point_jacobian", "pregrasp_and_squeeze", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -68,21 +68,29 @@ def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphe
     return pre, squeeze
 
 
-def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, iters: int = 300) -> torch.Tensor:
-    """``(B, F, 3)`` contact forces with the smallest net wrench, each in its friction cone.
+def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, iters: int = 300,
+                    min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None) -> torch.Tensor:
+    """``(B, C, 3)`` contact forces with the smallest net wrench, each in its friction cone.
 
-    ``f_i = lam_i n_i + t_i`` with ``lam_i >= 1``, ``t_i . n_i = 0``, ``|t_i| <= mu lam_i``,
-    minimizing ``|sum f_i|^2 + |sum (p_i - c) x f_i|^2 / L^2`` (``c`` the contact centroid, ``L``
-    the mean contact distance from it, as in the contact position normalization) by projected
-    gradient descent (FISTA). A force-closure set reaches zero net wrench (internal forces only); the
-    residual of any other set is as small as the cones allow. points ``(B, F, 3)`` m.
+    ``f_i = lam_i n_i + t_i`` with ``lam_i >= min_normal_i`` (default 1: every contact grips),
+    ``t_i . n_i = 0``, ``|t_i| <= mu lam_i``, minimizing ``|sum f_i|^2 + |sum (p_i - c) x f_i|^2 / L^2``
+    (``c`` the centroid of the active contacts, ``L`` their mean distance from it, as in the contact
+    position normalization) by projected gradient descent (FISTA). A force-closure set reaches zero
+    net wrench (internal forces only); the residual of any other set is as small as the cones
+    allow. points ``(B, C, 3)`` m; min_normal ``(B, C)``; active ``(B, C)`` bool (inactive contacts
+    carry no force).
     """
-    c = points.mean(1, keepdim=True)
-    r = points - c
-    r = r / r.norm(dim=-1).mean(1)[:, None, None].clamp_min(1e-9)
+    B, C = points.shape[:2]
+    lo = points.new_ones(B, C) if min_normal is None else min_normal.to(points.dtype)
+    on = points.new_ones(B, C) if active is None else active.to(points.dtype)
+    lo = (lo * on)[..., None]
+    w = on[..., None]
+    c = (points * w).sum(1, keepdim=True) / w.sum(1, keepdim=True).clamp_min(1.0)
+    r = (points - c) * w
+    r = r / ((r.norm(dim=-1).sum(1) / on.sum(1).clamp_min(1.0))[:, None, None]).clamp_min(1e-9)
     n = inward_normals / inward_normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    F = points.shape[1]
-    def project(f):  # Euclidean projection onto {lam >= 1, |t| <= mu lam}
+
+    def project(f):  # Euclidean projection onto {lam >= lo, |t| <= mu lam}, zero where inactive
         lam = (f * n).sum(-1, keepdim=True)
         t = f - lam * n
         s = t.norm(dim=-1, keepdim=True).clamp_min(1e-12)
@@ -90,13 +98,13 @@ def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: floa
         inside = s <= mu * lam
         lam_c = torch.where(inside, lam, lam_k)
         t_c = torch.where(inside, t, t * (mu * lam_k / s))
-        low = lam_c < 1.0  # the cone's projection violates lam >= 1: project onto the disc lam = 1
-        t_c = torch.where(low, t * (mu / s).clamp_max(1.0), t_c)
-        return torch.where(low, torch.ones_like(lam_c), lam_c) * n + t_c
+        low = lam_c < lo  # the cone's projection violates lam >= lo: project onto the disc lam = lo
+        t_c = torch.where(low, t * (mu * lo / s).clamp_max(1.0), t_c)
+        return (torch.where(low, lo, lam_c) * n + t_c) * w
 
-    f = y = n.clone()
-    # Lipschitz constant of the residual's gradient: 2 |A|^2 <= 2 F (1 + max |r|^2)
-    step = 1.0 / (2 * F * (1 + r.square().sum(-1).amax(-1)))[:, None, None]
+    f = y = n * lo.clamp_min(1e-3) * w
+    # Lipschitz constant of the residual's gradient: 2 |A|^2 <= 2 C (1 + max |r|^2)
+    step = 1.0 / (2 * on.sum(1).clamp_min(1.0) * (1 + r.square().sum(-1).amax(-1)))[:, None, None]
     for k in range(iters):  # accelerated projected gradient (FISTA)
         force = y.sum(1, keepdim=True)  # (B, 1, 3)
         torque = torch.linalg.cross(r, y).sum(1, keepdim=True)
@@ -105,6 +113,28 @@ def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: floa
         y = f_next + (k / (k + 3)) * (f_next - f)
         f = f_next
     return f
+
+
+def point_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, links: torch.Tensor,
+                   points: torch.Tensor) -> torch.Tensor:
+    """``(B, 3C, J)`` d(points)/d(joints), m/rad, through the joint couplings, for world ``points
+    (B, C, 3)`` carried by hand links ``links (B, C)`` (indices into the hand's links)."""
+    B, J = joints.shape
+    C = links.shape[1]
+    R = 3 * C
+    with torch.no_grad():
+        T0 = hand.link_transforms(root_pose.detach(), hand.apply_couplings(joints.detach()))
+        rows = torch.arange(B, device=joints.device)[:, None]
+        Tl = T0[rows, links]  # (B, C, 4, 4)
+        local = (Tl[..., :3, :3].transpose(-1, -2) @ (points - Tl[..., :3, 3])[..., None]).squeeze(-1)
+    with torch.enable_grad():  # one pass over R copies of the batch: copy r carries output row r
+        q = joints.detach().repeat(R, 1).requires_grad_(True)  # (R B, J)
+        T = hand.link_transforms(root_pose.detach().repeat(R, 1), hand.apply_couplings(q)).reshape(R, B, -1, 4, 4)
+        Ti = T[:, rows, links]  # (R, B, C, 4, 4)
+        x = ((Ti[..., :3, :3] @ local[None, ..., None]).squeeze(-1) + Ti[..., :3, 3]).reshape(R, B, R)
+        r = torch.arange(R, device=joints.device)
+        (g,) = torch.autograd.grad(x[r, :, r].sum(), q)
+    return g.reshape(R, B, J).transpose(0, 1)
 
 
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
@@ -137,6 +167,45 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     return pre, squeeze
 
 
+def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
+                 points: torch.Tensor, inward_normals: torch.Tensor, link_points: torch.Tensor,
+                 link_normals: torch.Tensor, link_touching: torch.Tensor, mu: float, kp: float, force_n: float,
+                 approach_m: float, movable: torch.Tensor, damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze balances the whole hand's contacts.
+
+    As :func:`force_squeeze`, but the balanced forces are solved over every contact the closed
+    hand makes, not the task fingertips alone: the fingertips (``points``/``inward_normals``
+    ``(B, F, 3)``, each gripping with a normal force >= 1) and every other link touching the
+    object (``link_points``/``link_normals`` ``(B, L, 3)``, ``link_touching (B, L)``, in the hand's
+    link order as :func:`datagen.synth.select.link_contacts` gives them; normal force >= 0: they may
+    carry load but need not). A phalanx or the palm resting on the object takes part of the grip,
+    so the fingertips' forces no longer have to cancel among themselves, and the joint torques
+    ``tau = sum_c J_c^T f_c`` include the phalanges' share. The palm (no movable joint) only
+    reacts. Scaled so the largest fingertip force is ``force_n`` times the set's balance.
+    """
+    B, F = points.shape[:2]
+    tip_links = hand.sphere_link_index[tip_spheres]  # (F,)
+    links = hand.sphere_link_index.unique()  # (L,) the link order of link_contacts
+    others = link_touching & ~(links[:, None] == tip_links[None, :]).any(-1)[None, :]  # (B, L)
+    P = torch.cat([points, link_points], 1)
+    N = torch.cat([inward_normals, link_normals], 1)
+    active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), others], 1)
+    lo = torch.cat([P.new_ones(B, F), P.new_zeros(B, links.shape[0])], 1)
+    f = balanced_forces(P, N, mu, min_normal=lo, active=active)
+    balance = (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)  # (B,)
+    f = f * (force_n * balance / f[:, :F].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
+    Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
+    dq_force = (Jc.transpose(1, 2) @ f.reshape(B, -1, 1)).squeeze(-1) / kp
+    Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
+    e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
+    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
+    dq_gap = (Jt.transpose(1, 2) @ torch.linalg.solve(Jt @ Jt.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
+    squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
+    pre = hand.apply_couplings(2 * joints - squeeze)
+    return pre, squeeze
+
+
 def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch.Tensor, torch.Tensor]:
     """The naive construction: every joint opens by up to ``squeeze_rad`` towards the hand's open
     pose (pregrasp) and closes as much past the grasp (squeeze). ``joints (B, J)`` radians."""
@@ -144,8 +213,17 @@ def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch
     return pre, hand.clamp_joints(2 * joints - pre)
 
 
-def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inward_normals, movable):
-    """``(pregrasp, squeeze)`` joints by ``cfg.squeeze_mode`` (a :class:`datagen.synth.SynthConfig`)."""
+def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inward_normals, movable,
+                         link_contacts=None):
+    """``(pregrasp, squeeze)`` joints by ``cfg.squeeze_mode`` (a :class:`datagen.synth.SynthConfig`).
+
+    ``link_contacts``: ``(points (B, L, 3), inward normals (B, L, 3), touching (B, L))`` of every
+    link (:func:`datagen.synth.select.link_contacts`), needed by the "hand" mode."""
+    if cfg.squeeze_mode == "hand":
+        if link_contacts is None:
+            raise ValueError("squeeze_mode 'hand' needs the links' contacts")
+        return hand_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, *link_contacts, cfg.mu,
+                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
     if cfg.squeeze_mode == "force":
         return force_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, cfg.mu, cfg.squeeze_kp,
                              cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)

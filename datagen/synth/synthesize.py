@@ -26,7 +26,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
-from datagen.synth.select import best_seeds
+from datagen.synth.select import best_seeds, link_contacts
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
@@ -152,8 +152,10 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         root_f = x.root_pose()
         state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m)
+        links = (link_contacts(hand, targets, object_index, root_f, grasp_j, cfg.seed_contact_gap_m)
+                 if cfg.squeeze_mode == "hand" else None)
         pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
-                                           state.contact_normals, finger_joint_mask(hand))
+                                           state.contact_normals, finger_joint_mask(hand), links)
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, object_index, root_f, j, tip_spheres,
