@@ -23,7 +23,7 @@ REGISTRARS: dict[str, str] = {
     "tasks": "datagen.listing:register_tasks",
     "manifest": "datagen.objects.commands:register_manifest",
     "prepare": "datagen.objects.commands:register_prepare",
-    "synth": "datagen.synth.commands:register_synth",
+    "synth": "datagen.pipeline.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",
     "run": "workers.cli:register_run",

@@ -18,7 +18,7 @@ RANK = {
     "wrench": 2, "hands": 2, "objects": 2,
     "tasks": 3, "io": 3,
     "synth": 4, "eval": 4,
-    "interop": 5,
+    "interop": 5, "pipeline": 5,
     "view": 6, "cli": 6, "listing": 6,
 }
 

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 
+from datagen._atomic import atomic_write_text
 from datagen.synth.config import FORCE_CLOSURE_SEEDS
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
@@ -366,6 +367,7 @@ class JobDir:
         return out
 
     def record_finished(self, index: int, summary: dict) -> None:
+        self.ledger_path(index).parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
 
 
@@ -373,9 +375,3 @@ def shard_slices(n_objects: int, per_shard: int) -> list[tuple[int, int]]:
     """[start, stop) object ranges of the shards."""
     return [(a, min(a + per_shard, n_objects)) for a in range(0, n_objects, per_shard)]
 
-
-def atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
