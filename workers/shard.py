@@ -25,6 +25,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from datagen._atomic import atomic_path, atomic_write_text
+from datagen.pipeline import failure
 from schemas import arrow_schema
 
 from .job import JobConfig, JobDir
@@ -72,8 +73,8 @@ def write_table_atomic(table: pa.Table, path: Path) -> None:
 
 def _failure(fails: list, shard: int, object_id: str, stage: str, reason: str, message: str,
              scale: float = float("nan"), task: str = "") -> None:
-    fails.append({"object_id": object_id, "object_scale_m": scale, "task": task, "stage": stage,
-                  "reason": reason or "error", "message": message, "shard": shard})
+    """Append a `failures` row of shard ``shard`` (`datagen.pipeline.failure` plus the shard)."""
+    fails.append({**failure(object_id, stage, reason, message, scale, task), "shard": shard})
 
 
 def _hand(name: str, device: str):
