@@ -35,7 +35,8 @@ from datagen.eval.scene import pieces_from_processed
 from datagen.hands import load_hand
 from datagen.objects.process import process_object
 from datagen.objects.sources import iter_source
-from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.pipeline import BatchObject, build_targets, synthesize_rows
+from datagen.synth import SynthConfig
 from datagen.tasks import load_task
 from datagen.synth.energies import contact_sphere_index
 from datagen.synth.squeeze import force_squeeze, joint_squeeze, normal_squeeze
@@ -69,11 +70,11 @@ def main() -> None:
     refs = list(iter_source("procedural", args.objects))
     procs = [process_object(r) for r in refs]
     scale = 0.08
-    targets = [GraspTarget.from_processed(p, scale) for p in procs]
+    targets = build_targets([BatchObject(p, (scale,)) for p in procs])
     pieces = [pieces_from_processed(p, scale) for p in procs]
     cfg = SynthConfig(iters=args.iters, seed=0)
     t0 = time.perf_counter()
-    res = synthesize(hand, targets, load_task("force_closure"), cfg, args.grasps)
+    res, _ = synthesize_rows(hand, targets, load_task("force_closure"), cfg, args.grasps)
     t_synth = time.perf_counter() - t0
 
     grasp_j, root = res.grasp[:, 7:], res.grasp[:, :7]

@@ -10,6 +10,8 @@ The names below are the curated API; each is imported from its package on first 
     target = datagen.GraspTarget.from_processed(obj, scale=0.08)
     result = datagen.synthesize(hand, [target], datagen.load_task("force_closure"), datagen.SynthConfig(), 16)
     with datagen.Evaluator(hand, datagen.EvalConfig()) as ev: ...
+    rows = datagen.run_batch([datagen.BatchObject(obj, (0.08,))], hand, ["force_closure"],
+                             datagen.SynthConfig(), datagen.EvalConfig(), grasps_per_object=16, seed=0).rows
     loader = torch.utils.data.DataLoader(datagen.GraspDataset("jobs/default"), batch_size=256)
 """
 
@@ -30,6 +32,7 @@ _API = {
     "GraspTarget": "datagen.synth", "SynthConfig": "datagen.synth", "synthesize": "datagen.synth",
     "EvalConfig": "datagen.eval", "Evaluator": "datagen.eval", "pieces_from_processed": "datagen.eval",
     "GraspDataset": "datagen.io", "read_job": "datagen.io",
+    "BatchObject": "datagen.pipeline", "run_batch": "datagen.pipeline",
 }
 
 __all__ = ["__version__", *_API]

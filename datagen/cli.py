@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 
 import datagen
 
-__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "main"]
+__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "install_log_handler", "main"]
 
 # subcommand name -> "module:function" registering it
 REGISTRARS: dict[str, str] = {
@@ -23,7 +24,7 @@ REGISTRARS: dict[str, str] = {
     "tasks": "datagen.listing:register_tasks",
     "manifest": "datagen.objects.commands:register_manifest",
     "prepare": "datagen.objects.commands:register_prepare",
-    "synth": "datagen.synth.commands:register_synth",
+    "synth": "datagen.pipeline.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",
     "run": "workers.cli:register_run",
@@ -89,8 +90,35 @@ def _domain_errors() -> tuple[type[BaseException], ...]:
     return tuple(out)
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to the current ``sys.stderr`` (not the one at creation: tests and front ends swap it)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"datagen: {record.levelname.lower()}: {record.getMessage()}"
+
+
+def install_log_handler() -> None:
+    """The command line's one logging handler: the library's warnings and errors (logger
+    ``datagen`` and its children) on stderr as ``datagen: warning: ...``. Installed once."""
+    logger = logging.getLogger("datagen")
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        handler = _StderrHandler()
+        handler.setLevel(logging.WARNING)
+        logger.addHandler(handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     from datagen.gl import drop_unusable
+
+    install_log_handler()
 
     drop_unusable()  # a MUJOCO_GL that would make `import mujoco` fail is dropped, with a warning
     argv = sys.argv[1:] if argv is None else list(argv)

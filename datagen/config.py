@@ -30,7 +30,7 @@ import yaml
 
 from datagen.errors import ConfigError
 
-__all__ = ["Config", "from_mapping", "stable_hash", "to_plain"]
+__all__ = ["Config", "check_types", "from_mapping", "stable_hash", "to_plain"]
 
 C = TypeVar("C", bound="Config")
 
@@ -106,6 +106,18 @@ def from_mapping(cls: type[C], data: Mapping[str, Any] | None, where: str | None
     if missing:
         raise err.make(where, f"missing required field(s) {missing}")
     return cls(**kwargs)
+
+
+def check_types(obj: Any, where: str | None = None) -> None:
+    """Raise the class's config error (see `from_mapping`) for the first field of dataclass ``obj``
+    whose value does not fit its annotation, by the rules of ``from_dict``; nothing is converted
+    (a list fits a tuple, an int a float). For ``__post_init__``: direct construction in code is
+    checked like a mapping."""
+    cls = type(obj)
+    err, hints = _error_of(cls), typing.get_type_hints(cls)
+    for f in dataclasses.fields(obj):
+        if f.init:
+            _coerce(hints.get(f.name, Any), getattr(obj, f.name), f"{where or cls.__name__}.{f.name}", err)
 
 
 def _describe(tp: Any) -> str:

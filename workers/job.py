@@ -33,9 +33,12 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Mapping
 
 
+from datagen._atomic import atomic_write_text
+from datagen.config import Config, check_types
+from datagen.errors import ConfigError, DatagenError
 from datagen.synth.config import FORCE_CLOSURE_SEEDS
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
@@ -48,8 +51,12 @@ PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running sha
 MANIFEST_FAILURES = "manifest.parquet"  # failures/manifest.parquet: objects the manifest could not hold
 
 
-class JobError(RuntimeError):
+class JobError(DatagenError, RuntimeError):
     """A job that cannot start or go on (names the job directory and the reason)."""
+
+
+class JobConfigError(ConfigError, JobError):
+    """A malformed job config (unknown key, wrong type), from the config helper: a `JobError`."""
 
 
 # A cheap CoACD setting: threshold 0.1 and preprocess resolution 30 are 2-3x faster than the
@@ -68,47 +75,44 @@ MAX_GRID_RESOLUTION = 256               # 256^3 float32 = 64 MiB per object
 
 
 @dataclass(frozen=True)
-class JobConfig:
+class JobConfig(Config):
     """Everything that determines a job's rows (hashed: any change is a different job), plus the
-    execution settings of `EXECUTION_FIELDS` (not hashed)."""
+    execution settings of `EXECUTION_FIELDS` (not hashed). From a mapping or YAML through the
+    config helper (`datagen.config`: unknown keys refused, types checked); bounds here."""
+
+    config_error: ClassVar[type[ConfigError]] = JobConfigError
 
     source: str = "procedural"          #: object source URI (datagen.objects.sources)
     count: int = 6                      #: objects (SCALE)
-    scales: tuple = (0.06, 0.08)        #: object scales, metres (of a built manifest; a given
+    scales: tuple[float, ...] = (0.06, 0.08)  #: object scales, metres (of a built manifest; a given
                                         #: manifest's own scales are used as they are)
     test_fraction: float = 0.1          #: manifest split
     manifest: str = ""                  #: existing manifest file (its first `count` objects); "" = build
     hand: str = "shadow"                #: built-in hand name or hand spec YAML path
-    tasks: tuple = ("force_closure",)   #: built-in task names or task YAML paths
+    tasks: tuple[str, ...] | str = ("force_closure",)  #: built-in task names or task YAML paths (one: a string)
     grasps_per_object: int = 8          #: per object and scale (1 to 10000)
     objects_per_shard: int = 2
     seed: int = 0                       #: base seed, 0 <= seed < 2**62; shard k synthesizes with seed + k
     grid_resolution: int = 48           #: GraspTarget SDF grid nodes per axis, 8 to 256 (64: ~25 s/object
                                         #: on one core, 48: ~10 s, 32: ~3 s); built once per object
     object_timeout_s: float = 300.0     #: per-object processing limit (isolated process); not hashed
-    process: dict = field(default_factory=lambda: dict(FAST_PROCESS))  #: ProcessConfig fields
-    synth: dict = field(default_factory=lambda: {"iters": 300, "seeds_per_grasp": FORCE_CLOSURE_SEEDS})
+    process: dict[str, Any] = field(default_factory=lambda: dict(FAST_PROCESS))  #: ProcessConfig fields
+    synth: dict[str, Any] = field(default_factory=lambda: {"iters": 300, "seeds_per_grasp": FORCE_CLOSURE_SEEDS})
     #: SynthConfig fields (multi-start: the best of 8 starts per grasp; benchmarks/results/quality.md)
-    eval: dict = field(default_factory=dict)  #: EvalConfig fields
+    eval: dict[str, Any] = field(default_factory=dict)  #: EvalConfig fields
     cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads
                                         #: (not hashed: keep it fixed within a job for identical floats)
     gpus_per_shard: float = 1.0         #: used only when the cluster has GPUs
 
     def __post_init__(self):
-        from datagen.objects.config import check_field_types
-
         def need(ok: bool, what: str):
             if not ok:
                 raise JobError(f"JobConfig.{what}")
 
+        check_types(self)
         if isinstance(self.tasks, str):
             object.__setattr__(self, "tasks", (self.tasks,))
-        bad = check_field_types(self, "JobConfig")
-        if bad:
-            raise JobError(bad)
-        need(all(isinstance(s, (int, float)) and not isinstance(s, bool) for s in self.scales),
-             f"scales must be numbers (metres), got {self.scales!r}")
-        need(all(isinstance(t, str) and t for t in self.tasks), f"tasks must be names or paths, got {self.tasks!r}")
+        need(all(t for t in self.tasks), f"tasks must be names or paths, got {self.tasks!r}")
         object.__setattr__(self, "scales", tuple(float(s) for s in self.scales))
         object.__setattr__(self, "tasks", tuple(self.tasks))
         need(self.count >= 1, f"count must be an int >= 1, got {self.count!r}")
@@ -187,18 +191,12 @@ class JobConfig:
                                "(or the path of a task YAML)") from None
 
     @classmethod
-    def from_dict(cls, data: dict | None, where: str = "job config") -> "JobConfig":
-        if data is not None and not isinstance(data, dict):
-            raise JobError(f"{where}: a job config must be a mapping of JobConfig fields, got {type(data).__name__}")
-        data = dict(data or {})
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise JobError(f"{where}: unknown keys {unknown}; allowed: {sorted(known)}")
-        return cls(**data)
+    def from_dict(cls, data: Mapping[str, Any] | None = None, where: str | None = "job config") -> "JobConfig":
+        return super().from_dict(data, where)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "JobConfig":
+        """From a YAML mapping; tags, aliases and files over 1 MiB are refused (`read_yaml`)."""
         from datagen.objects.config import read_yaml
 
         try:
@@ -208,6 +206,7 @@ class JobConfig:
         return cls.from_dict(data, where=str(path))
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields as plain data (job.json's ``config``); `from_dict` of it gives an equal config."""
         d = dataclasses.asdict(self)
         d["scales"], d["tasks"] = list(self.scales), list(self.tasks)
         return d
@@ -366,6 +365,7 @@ class JobDir:
         return out
 
     def record_finished(self, index: int, summary: dict) -> None:
+        self.ledger_path(index).parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
 
 
@@ -373,9 +373,3 @@ def shard_slices(n_objects: int, per_shard: int) -> list[tuple[int, int]]:
     """[start, stop) object ranges of the shards."""
     return [(a, min(a + per_shard, n_objects)) for a in range(0, n_objects, per_shard)]
 
-
-def atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)

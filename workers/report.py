@@ -18,6 +18,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from datagen._atomic import atomic_write_text
 from schemas import column_table
 
 from .job import JobDir
@@ -234,5 +235,5 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
         md += [note, ""]
     md += ["## Config", "", "```json", json.dumps(cfg, indent=1, sort_keys=True), "```", ""]
     out = job.path / "README.md"
-    out.write_text("\n".join(md))
+    atomic_write_text(out, "\n".join(md))
     return out

@@ -42,6 +42,8 @@ def register_eval(sub: argparse._SubParsersAction) -> None:
 def _eval(args) -> int:
     import pyarrow.parquet as pq
 
+    from datagen._atomic import atomic_path
+
     from .table import evaluate_table, read_grasps, table_base
 
     cfg = _load_config(args.config, args.threads)
@@ -49,7 +51,8 @@ def _eval(args) -> int:
     t0 = time.perf_counter()
     out = evaluate_table(table, cfg, base=table_base(args.grasps), workers=args.workers)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(out, args.out)
+    with atomic_path(args.out) as tmp:
+        pq.write_table(out, tmp)
     ok = sum(out.column("success").to_pylist())
     print(f"wrote {args.out}: {out.num_rows} grasps, {ok} successful, "
           f"{time.perf_counter() - t0:.1f} s", file=sys.stderr)

@@ -12,6 +12,7 @@ Public API::
     ProcessConfig                                     config.py (YAML via ProcessConfig.from_yaml)
     process_object(ref, cfg, root) -> ProcessedObject process.py (cache: cache.py, files: layout.py)
     prepare(manifest, cfg, root, workers)             prepare.py (the `datagen prepare` command)
+    process_isolated(entry, cfg, root, timeout_s)     isolate.py (a child process with a time limit)
     MeshSDF(vertices, faces).query(points, scale)     sdf.py
     object_mjcf(...)                                  mjcf.py
     Reason, ObjectError, MeshProcessingError, ManifestError, SourceError   errors.py

@@ -49,16 +49,20 @@ def register_prepare(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cache", default=None, help="cache root (default $DATAGEN_CACHE or ~/.cache/datagen)")
     p.add_argument("--workers", type=int, default=1, help="objects processed in parallel")
     p.add_argument("--limit", type=int, default=None, help="process only the first N objects")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one object may take; it is then killed and recorded as a timeout failure "
+                        "(default: 600)")
     p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
     p.set_defaults(func=_prepare)
 
 
 def _prepare(args) -> int:
     from .config import ProcessConfig
-    from .prepare import prepare, summarize, write_results
+    from .prepare import DEFAULT_TIMEOUT_S, prepare, summarize, write_results
 
     cfg = ProcessConfig.from_yaml(args.config) if args.config else ProcessConfig()
-    results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit)
+    results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit,
+                      timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
     if args.results:
         write_results(results, args.results)
     print(summarize(results))

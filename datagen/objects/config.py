@@ -9,15 +9,17 @@ radius ``s`` metres.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
-__all__ = ["ProcessConfig", "PROCESS_VERSION", "read_yaml", "check_field_types"]
+from datagen.config import Config, check_types
+from datagen.errors import ConfigError
+
+__all__ = ["ProcessConfig", "PROCESS_VERSION", "read_yaml"]
 
 # Bump when the pipeline's output changes for the same config: it invalidates cache entries.
 PROCESS_VERSION = 1
@@ -61,37 +63,10 @@ def read_yaml(path: str | Path, what: str = "config"):
         raise ValueError(f"{path}: the {what} is nested too deeply") from None
 
 
-def _type_name(default) -> str:
-    return {bool: "true/false", int: "an integer", float: "a number", str: "a string", tuple: "a list",
-            list: "a list", dict: "a mapping"}[type(default)]
-
-
-def check_field_types(obj, where: str) -> str | None:
-    """The first field of dataclass ``obj`` whose value is not of its default's type (an int is
-    a number; a bool is neither), as a message naming it, or None."""
-    for f in dataclasses.fields(obj):
-        if f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
-        else:
-            continue
-        v = getattr(obj, f.name)
-        t = type(default)
-        if t not in (bool, int, float, str, tuple, list, dict):
-            continue
-        ok = (isinstance(v, bool) if t is bool else
-              isinstance(v, int) and not isinstance(v, bool) if t is int else
-              isinstance(v, (int, float)) and not isinstance(v, bool) if t is float else
-              isinstance(v, (tuple, list)) if t in (tuple, list) else isinstance(v, t))
-        if not ok:
-            return f"{where}.{f.name} must be {_type_name(default)}, got {v!r}"
-    return None
-
-
 @dataclass(frozen=True)
-class ProcessConfig:
-    """Settings of the per-object pipeline (see module docstring for units)."""
+class ProcessConfig(Config):
+    """Settings of the per-object pipeline (see module docstring for units). From a mapping or
+    YAML through the config helper (`datagen.config`: unknown keys refused, types checked)."""
 
     # --- validation (raw units of the input file) ---
     max_faces: int = 500_000             # larger meshes are rejected (too_many_faces)
@@ -114,18 +89,15 @@ class ProcessConfig:
     # --- MuJoCo model ---
     total_mass_kg: float = 0.1           # split over pieces in proportion to their volume
     geom_condim: int = 4
-    geom_friction: tuple = (0.6, 0.02, 0.0001)
+    geom_friction: tuple[float, float, float] = (0.6, 0.02, 0.0001)
     mjcf_check_scale: float = 0.06       # the model is compiled by MuJoCo at this scale (m)
-    extra: dict = field(default_factory=dict, compare=False, repr=False)  # must stay empty
 
     def __post_init__(self):
         def need(ok: bool, what: str):
             if not ok:
-                raise ValueError(f"ProcessConfig.{what}")
+                raise ConfigError(f"ProcessConfig.{what}")
 
-        bad = check_field_types(self, "ProcessConfig")
-        if bad:
-            raise ValueError(bad)
+        check_types(self)
         need(self.max_faces > 0, f"max_faces must be > 0, got {self.max_faces}")
         need(self.max_abs_coordinate_raw > 0, "max_abs_coordinate_raw must be > 0")
         need(0 <= self.min_volume_fraction < 1, "min_volume_fraction must be in [0, 1)")
@@ -142,31 +114,13 @@ class ProcessConfig:
         need(len(self.geom_friction) == 3 and min(self.geom_friction) >= 0,
              "geom_friction must be 3 non-negative numbers (slide, torsion, roll)")
         need(self.mjcf_check_scale > 0, "mjcf_check_scale must be > 0 (metres)")
-        need(not self.extra, f"unknown fields {sorted(self.extra)}")
         object.__setattr__(self, "geom_friction", tuple(float(x) for x in self.geom_friction))
 
     @classmethod
-    def from_dict(cls, data: dict) -> "ProcessConfig":
-        """Build from a plain dict; unknown keys are an error naming them."""
-        if not isinstance(data, dict):
-            raise ValueError(f"a processing config must be a mapping of ProcessConfig fields, got {data!r}")
-        names = {f.name for f in dataclasses.fields(cls)} - {"extra"}
-        unknown = {k: v for k, v in data.items() if k not in names}
-        return cls(**{k: v for k, v in data.items() if k in names}, extra=unknown)
-
-    @classmethod
     def from_yaml(cls, path: str | Path) -> "ProcessConfig":
-        """Load from a YAML mapping (an empty file gives the defaults)."""
-        data = read_yaml(path, "processing config") or {}
-        if not isinstance(data, dict):
-            raise ValueError(f"{path}: a processing config must be a YAML mapping")
-        return cls.from_dict(data)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d.pop("extra")
-        d["geom_friction"] = list(d["geom_friction"])
-        return d
+        """Load from a YAML mapping (an empty file gives the defaults); tags, aliases and files
+        over 1 MiB are refused (`read_yaml`)."""
+        return cls.from_dict(read_yaml(path, "processing config") or {}, where=str(path))
 
     def hash(self) -> str:
         """sha256 of the canonical JSON of the config and PROCESS_VERSION (the cache key part)."""

@@ -31,6 +31,8 @@ class Reason(str, enum.Enum):
     SURFACE_FAILED = "surface_failed"        # no watertight simplified surface could be built
     MJCF_FAILED = "mjcf_failed"              # MuJoCo rejected the model of the pieces
     SHA_MISMATCH = "sha256_mismatch"         # the file changed since the manifest was built
+    TIMEOUT = "timeout"                      # processing exceeded its time limit (isolate.py)
+    CRASHED = "crashed"                      # the processing process died (isolate.py)
     # manifest-level reasons
     MALFORMED_LINE = "malformed_line"        # not a JSON object
     SCHEMA = "schema"                        # missing/extra/mistyped field

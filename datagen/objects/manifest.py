@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import re
-import sys
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -24,6 +24,8 @@ from typing import Iterable
 from .errors import ManifestError, ObjectError, Reason, SourceError
 from . import task_objects
 from .sources import ObjectRef, canonical_source, iter_source, resolve
+
+log = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_SCALES", "ManifestEntry", "Rejected", "split_of", "build_manifest", "write_manifest",
            "load_manifest"]
@@ -79,8 +81,8 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
     """Enumerate a source and hash each raw mesh. Every entry is validated exactly as
     `load_manifest` validates a line, so a built manifest always loads. Objects that cannot be
     entries (a missing or unreadable file, a directory or device, a path or symlink leaving the
-    source root) are appended to ``rejected`` as `Rejected`, or, when it is None, reported on
-    stderr. ``count`` counts accepted objects (a rejected file does not take an object's place).
+    source root) are appended to ``rejected`` as `Rejected`, or, when it is None, logged as
+    warnings (logger ``datagen.objects.manifest``; the command line prints them on stderr). ``count`` counts accepted objects (a rejected file does not take an object's place).
     Objects of the ``tasks`` source get their own scale instead of ``scales``."""
     scales = tuple(float(s) for s in scales)
     if not scales or min(scales) <= 0:
@@ -101,7 +103,7 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
     def reject(ref, exc: ObjectError):
         r = Rejected(ref.object_id, ref.path, exc.reason.value, str(exc))
         if rejected is None:
-            print(f"warning: skipped {r.message}", file=sys.stderr, flush=True)
+            log.warning("skipped %s", r.message)
         else:
             rejected.append(r)
 

@@ -1,23 +1,31 @@
-"""Batch processing of a manifest: every object ends as "ok" or a recorded failure reason."""
+"""Batch processing of a manifest: every object ends as "ok" or a recorded failure reason.
+
+Each object is processed in its own process with a time limit (`isolate.process_isolated`): one
+that hangs or crashes CoACD is a ``timeout`` or ``crashed`` failure naming it, and the others are
+processed all the same. Cache hits start no process.
+"""
 
 from __future__ import annotations
 
 import collections
 import json
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+from datagen._atomic import atomic_write_text
 
 from .cache import cache_root, clean_stale_temp
 from .config import ProcessConfig
+from .isolate import Step, process_isolated
 from .manifest import ManifestEntry, load_manifest
 from .process import ProcessedObject, process_object
 
-__all__ = ["prepare", "summarize"]
+__all__ = ["DEFAULT_TIMEOUT_S", "prepare", "summarize"]
+
+DEFAULT_TIMEOUT_S = 600.0  #: per-object processing limit (CoACD takes 6-120 s on a typical object)
 
 
-def _one(args) -> dict:
-    entry, cfg, root = args
-    r: ProcessedObject = process_object(entry.ref(), cfg, root, entry.sha256)
+def _row(entry: ManifestEntry, r: ProcessedObject) -> dict:
     return {"id": entry.id, "status": r.status, "reason": r.reason, "message": r.message,
             "entry": str(r.entry) if r.entry else "", "cache_hit": r.cache_hit,
             "pieces": len(r.piece_volumes), "timings": r.timings}
@@ -25,29 +33,33 @@ def _one(args) -> dict:
 
 def prepare(manifest: str | Path | list[ManifestEntry], cfg: ProcessConfig | None = None,
             root: str | Path | None = None, workers: int = 1, progress: bool = True,
-            limit: int | None = None) -> list[dict]:
-    """Process every manifest object (cache hits are free). Returns one status dict per object,
-    in manifest order: id, status ('ok'/'failed'), reason, message, entry, cache_hit, pieces,
-    timings (seconds per stage). Temp dirs left by killed runs (> 6 h old) are removed first."""
+            limit: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S, *,
+            step: Step = process_object) -> list[dict]:
+    """Process every manifest object (cache hits are free), each in its own process killed after
+    ``timeout_s`` seconds, ``workers`` at a time. Returns one status dict per object, in manifest
+    order: id, status ('ok'/'failed'), reason, message, entry, cache_hit, pieces, timings
+    (seconds per stage). Temp dirs left by killed runs (> 6 h old) are removed first. ``step``:
+    what each process runs (`process_object`; tests inject a slow or crashing one)."""
+    if not timeout_s > 0:
+        raise ValueError(f"the per-object time limit must be > 0 seconds, got {timeout_s}")
     entries = load_manifest(manifest) if isinstance(manifest, (str, Path)) else list(manifest)
     entries = entries[:limit] if limit is not None else entries
     cfg = cfg or ProcessConfig()
     clean_stale_temp(cache_root(root))  # temp dirs of killed runs older than 6 h
-    jobs = [(e, cfg, str(root) if root else None) for e in entries]
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=len(jobs), desc="prepare", unit="obj")
-    out = []
-    if workers <= 1:
-        for job in jobs:
-            out.append(_one(job))
-            bar and bar.update()
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            for res in pool.map(_one, jobs):
-                out.append(res)
-                bar and bar.update()
+        bar = tqdm(total=len(entries), desc="prepare", unit="obj")
+
+    def one(entry: ManifestEntry) -> dict:
+        r = process_isolated(entry, cfg, root, timeout_s, step=step,
+                             remedy="raise `datagen prepare --timeout` and rerun")
+        bar and bar.update()
+        return _row(entry, r)
+
+    # threads only wait: each object's work is in its own process
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        out = list(pool.map(one, entries))
     bar and bar.close()
     return out
 
@@ -62,4 +74,4 @@ def summarize(results: list[dict]) -> str:
 
 
 def write_results(results: list[dict], path: str | Path) -> None:
-    Path(path).write_text("".join(json.dumps(r, sort_keys=True) + "\n" for r in results))
+    atomic_write_text(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in results))

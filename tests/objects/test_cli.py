@@ -54,6 +54,20 @@ def test_bad_config_names_the_field(tmp_path, capsys):
     assert "coacd_threshold" in capsys.readouterr().err
 
 
+def test_skipped_files_are_warnings_on_stderr(tmp_path, capsys, box_obj):
+    """The library logs a skipped file (logger datagen.objects.manifest); the CLI's one handler
+    prints it on stderr, and the manifest holds the other objects."""
+    (tmp_path / "src" / "x.obj").mkdir(parents=True)  # a folder named like a mesh
+    (tmp_path / "src" / "y.obj").write_bytes(box_obj)
+    out = tmp_path / "m.jsonl"
+    assert cli.main(["manifest", "build", "--source", f"dir:{tmp_path / 'src'}", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "datagen: warning: skipped x.obj: not_a_regular_file" in err, err
+    assert [json.loads(x)["id"] for x in out.read_text().splitlines()] == ["y.obj"]
+    assert cli.main(["manifest", "build", "--source", f"dir:{tmp_path / 'src'}", "--out", str(out)]) == 0
+    assert capsys.readouterr().err.count("skipped x.obj") == 1  # main() again: still one handler
+
+
 def register_hello(sub):
     p = sub.add_parser("hello")
     p.set_defaults(func=lambda args: print("hi") or 0)

@@ -126,7 +126,7 @@ def test_config_yaml_refuses_tags_aliases_and_wrong_types(tmp_path):
         with pytest.raises(ValueError, match=match):
             read_yaml(tmp_path / name)
     (tmp_path / "typed.yaml").write_text("coacd_threshold: lots\n")
-    with pytest.raises(ValueError, match="ProcessConfig.coacd_threshold must be a number, got 'lots'"):
+    with pytest.raises(ValueError, match=r"typed.yaml.coacd_threshold: must be a number, got 'lots'"):
         ProcessConfig.from_yaml(tmp_path / "typed.yaml")
 
 

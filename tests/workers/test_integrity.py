@@ -50,11 +50,11 @@ def test_vanished_or_changed_file_is_a_failure_without_rows(tmp_path, cache_dir)
     job = JobDir(tmp_path / "job")
     job.init(cfg)
     entries = prepare_manifest(job, cfg)
-    from workers.shard import process_isolated
+    from datagen.objects.isolate import process_isolated
 
     pcfg = cfg.build_configs()[0]
     for e in entries:  # both are in the cache, under the manifest's hashes, as after an earlier job
-        assert process_isolated(e, pcfg, cache_dir, 120)[0] is not None
+        assert process_isolated(e, pcfg, cache_dir, 120).ok
     (root / "gone.obj").unlink()
     _box(root / "changed.obj", (0.3, 0.9, 0.4))
     run_all(job.path, cfg, cache_dir)

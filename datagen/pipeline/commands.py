@@ -1,4 +1,7 @@
-"""CLI: ``datagen synth --hand shadow --object PATH --task force_closure --num 100 --out F.parquet``."""
+"""CLI: ``datagen synth --hand shadow --object PATH --task force_closure --num 100 --out F.parquet``.
+
+The synthesis half of the pipeline (`datagen.pipeline`: target -> synthesis -> rows) on one
+object; ``datagen eval`` evaluates the table it writes."""
 
 from __future__ import annotations
 
@@ -6,17 +9,17 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["register_synth", "load_target"]
+__all__ = ["load_object", "register_synth"]
 
 
-def load_target(path: str | Path, scale: float, cache: str | None = None, process_config: str | None = None):
-    """A :class:`GraspTarget` from a raw mesh file (processed through the objects cache) or a
-    processed-object directory (one holding ``meta.json``)."""
+def load_object(path: str | Path, cache: str | None = None, process_config: str | None = None):
+    """The processed object (`datagen.objects.ProcessedObject`, status ok) of a raw mesh file
+    (processed through the objects cache) or of a processed-object directory (one holding
+    ``meta.json``). Raises FileNotFoundError or ValueError naming the object and the reason."""
     from datagen.objects import layout
     from datagen.objects.config import ProcessConfig
     from datagen.objects.process import load_processed, process_object
     from datagen.objects.sources import resolve
-    from datagen.synth.target import GraspTarget
 
     p = Path(path)
     if p.is_dir() and (p / layout.META).is_file():
@@ -29,7 +32,7 @@ def load_target(path: str | Path, scale: float, cache: str | None = None, proces
         raise FileNotFoundError(f"object {p} is neither a mesh file nor a processed-object directory")
     if not processed.ok:
         raise ValueError(f"object {p}: processing failed ({processed.reason}): {processed.message}")
-    return GraspTarget.from_processed(processed, scale, cache=cache)  # SDF grid: cached beside the objects
+    return processed
 
 
 def register_synth(sub: argparse._SubParsersAction) -> None:
@@ -61,10 +64,11 @@ def _synth(args) -> int:
     import torch
     import yaml
 
+    from datagen._atomic import atomic_path
     from datagen.hands import load_hand
-    from datagen.synth import SynthConfig, synthesize
+    from datagen.pipeline import BatchObject, build_targets, synthesize_rows
+    from datagen.synth import SynthConfig
     from datagen.tasks import load_task
-    from datagen.synth.rows import result_table
 
     cfg = SynthConfig.from_dict(yaml.safe_load(Path(args.config).read_text()) if args.config else {}, where=args.config or "defaults")
     from datagen.synth.config import FORCE_CLOSURE_SEEDS
@@ -77,15 +81,16 @@ def _synth(args) -> int:
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     hand = load_hand(args.hand, device=device)
     task = load_task(args.task)
-    targets = [load_target(args.object, s, args.cache).to(device) for s in args.scale]
+    processed = load_object(args.object, args.cache)
+    # one batch object per scale: each target built at its own scale (grid from the grid cache)
+    targets = build_targets([BatchObject(processed, (s,)) for s in args.scale], cache=args.cache, device=device)
 
     def progress(it, x, e, ok):
         if sys.stderr.isatty() and (it % 50 == 0 or it == cfg.iters - 1):
             print(f"\r  iter {it + 1}/{cfg.iters}  energy {e.mean():.4f}  accepted {ok.float().mean():.0%}",
                   end="", file=sys.stderr, flush=True)
 
-    result = synthesize(hand, targets, task, cfg, args.num, callback=progress)
-    table = result_table(result, targets, hand, task, cfg)
+    result, table = synthesize_rows(hand, targets, task, cfg, args.num, callback=progress)
     usable = int(result.usable(cfg.contact_threshold_m).sum())
     if usable == 0:
         e = {k: float(v.mean()) for k, v in result.energies.items()}
@@ -96,9 +101,8 @@ def _synth(args) -> int:
               f"{pen:.1f} mm > 5 mm); mean energies {e}. Nothing written to {args.out}.", file=sys.stderr)
         return 3
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(str(args.out) + ".tmp")
-    pq.write_table(table, tmp)
-    tmp.replace(args.out)
+    with atomic_path(args.out) as tmp:
+        pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
           f"({result.timings['optimize_s']:.1f} s optimizing on {device})")
     return 0

@@ -1,0 +1,226 @@
+"""The batch pipeline as one pure function: processed objects -> evaluated rows.
+
+    objects = [BatchObject(process_object(ref), scales=(0.06, 0.08))]
+    out = run_batch(objects, load_hand("shadow"), ["force_closure"], SynthConfig(), EvalConfig(),
+                    grasps_per_object=8, seed=0)
+    out.rows       # pyarrow Table of the `evaluated` schema (schemas/evaluated.json), no metadata
+    out.failures   # one dict per failed object/stage: object_id, object_scale_m, task, stage, reason, message
+
+Stages, each a function of its own so a front end can stop early (``datagen synth`` writes the
+synthesized rows without evaluating them) or swap one (a benchmark executing other squeezes):
+
+1. `build_targets`: one `GraspTarget` per object and scale. The SDF and its grid are in
+   normalized units, so they are built once per object (at its first scale) and the hull samples
+   are rescaled for the other scales.
+2. per task (its objects paired by `datagen.tasks.task_targets`): `synthesize_rows`, one batch
+   for every target of the task, seeded by ``seed``; rows of the ``grasps`` schema.
+3. `evaluate_rows`: the MuJoCo test, per object and scale, so one bad object costs only its rows.
+
+Anything that fails for an object (its target, the batch's synthesis, its evaluation) becomes a
+failure record with the stage and the reason, never an exception (an unknown task name still
+raises, as it is found). No Ray,
+no job directory, no writing: `workers.shard` processes the objects (isolated, time-limited),
+calls `run_batch` and writes the shard. Same inputs and seed, same rows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from schemas import arrow_schema
+
+__all__ = ["BatchObject", "BatchResult", "build_targets", "evaluate_rows", "failure", "run_batch",
+           "synthesize_rows"]
+
+#: ``progress(done, total)``: work units done so far and in all (see `run_batch`)
+Progress = Callable[[float, float], None]
+
+
+@dataclass(frozen=True)
+class BatchObject:
+    """A processed object (``datagen.objects.ProcessedObject``, status ok) and the scales (metres
+    per normalized unit) it is synthesized at. What the rows record of it defaults to the
+    processed object's own: ``object_id``, ``object_path`` (its cache entry; a job passes the
+    path relative to the job directory, the evaluation's ``base``), ``mesh_sha256``; ``split``:
+    the manifest split ("" when there is none)."""
+
+    processed: object
+    scales: tuple[float, ...]
+    object_id: str = ""
+    object_path: str = ""
+    mesh_sha256: str = ""
+    split: str = ""
+
+    def __post_init__(self):
+        p = self.processed
+        object.__setattr__(self, "scales", tuple(float(s) for s in self.scales))
+        if not self.scales:
+            raise ValueError(f"object {self.object_id or p.object_id}: no scales to synthesize at")
+        object.__setattr__(self, "object_id", self.object_id or p.object_id)
+        object.__setattr__(self, "object_path", self.object_path or (str(p.entry) if p.entry else ""))
+        object.__setattr__(self, "mesh_sha256", self.mesh_sha256 or p.mesh_sha256)
+
+
+@dataclass
+class BatchResult:
+    """What `run_batch` returns: the evaluated rows (``evaluated`` schema without metadata, in
+    task, object, scale, grasp order), the failure records and seconds per stage
+    (``target_s``, ``synth_s``, ``eval_s``)."""
+
+    rows: pa.Table
+    failures: list[dict] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def failure(object_id: str, stage: str, reason: str, message: str, scale: float = float("nan"),
+            task: str = "") -> dict:
+    """A failure record (the ``failures`` schema's columns, less ``shard``)."""
+    return {"object_id": object_id, "object_scale_m": scale, "task": task, "stage": stage,
+            "reason": reason or "error", "message": message}
+
+
+def build_targets(objects: Sequence[BatchObject], *, grid_resolution: int | None = None,
+                  cache: str | Path | None = None, device: str = "cpu", failures: list | None = None,
+                  progress: Callable[[], None] | None = None) -> list:
+    """One `GraspTarget` per object and scale (in order). The SDF and its grid are built once per
+    object at its first scale (grids from the grid cache under ``cache``; ``grid_resolution``
+    nodes per axis, None: `GraspTarget`'s default); the other scales rescale its hull samples.
+    An object whose target cannot be built is appended to ``failures`` (stage ``target``) and
+    skipped; with ``failures=None`` it raises ValueError naming the object and the cause. ``progress()`` is called once per object."""
+    from datagen.synth import GraspTarget
+
+    kw = {} if grid_resolution is None else {"grid_resolution": grid_resolution}
+    targets = []
+    for o in objects:
+        try:
+            base = GraspTarget.from_processed(o.processed, o.scales[0], cache=cache, **kw)
+        except Exception as exc:  # noqa: BLE001 - recorded, never fatal
+            message = f"{o.object_id}: {type(exc).__name__}: {exc}"
+            if failures is None:
+                raise ValueError(f"cannot build the synthesis target of {message}") from exc
+            failures.append(failure(o.object_id, "target", "error", message))
+            continue
+        finally:
+            if progress is not None:
+                progress()
+        for s in o.scales:
+            # the id and hash are the caller's: the processed object may be a cache entry made for
+            # another object with the same bytes (its meta names that one)
+            t = dataclasses.replace(base, object_id=o.object_id, scale=float(s),
+                                    hull_points=base.hull_points * (s / base.scale), object_path=o.object_path,
+                                    mesh_sha256=o.mesh_sha256)
+            targets.append(t.to(device) if device != "cpu" else t)
+    return targets
+
+
+def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, *,
+                    splits: Mapping[str, str] | None = None, callback=None):
+    """``(SynthesisResult, table)``: ``grasps_per_object`` grasps on every target in one batch
+    (`datagen.synth.synthesize`, seeded by ``cfg.seed``) and their rows (``grasps`` schema,
+    `datagen.synth.rows.result_table`). ``callback(it, ...)`` is the optimizer's per-iteration hook."""
+    from datagen.synth import synthesize
+    from datagen.synth.rows import result_table
+
+    result = synthesize(hand, list(targets), task, cfg, grasps_per_object, callback=callback)
+    return result, result_table(result, list(targets), hand, task, cfg, splits=splits)
+
+
+def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, *, base: str | Path = ".",
+                  failures: list | None = None, progress: Callable[[], None] | None = None) -> list[pa.Table]:
+    """The rows of ``table`` evaluated in MuJoCo (`datagen.eval.table.evaluate_table`), one
+    table per target (object and scale) in ``targets`` order. A target whose evaluation raises is
+    appended to ``failures`` (stage ``eval``; raised when ``failures`` is None) and its rows
+    dropped. ``progress()`` is called before each target."""
+    from datagen.eval.table import evaluate_table
+
+    out = []
+    for t in targets:
+        if progress is not None:
+            progress()
+        mask = pc.and_(pc.equal(table["object_id"], t.object_id),
+                       pc.equal(table["object_scale_m"], pa.scalar(t.scale, pa.float32())))
+        try:
+            out.append(evaluate_table(table.filter(mask), eval_cfg, base=base, workers=1))
+        except Exception as exc:  # noqa: BLE001
+            if failures is None:
+                raise
+            failures.append(failure(t.object_id, "eval", "error", f"{t.object_id} at {t.scale} m, task "
+                                    f"{task_name}: {type(exc).__name__}: {exc}", t.scale, task_name))
+    return out
+
+
+def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, eval_cfg, *,
+              grasps_per_object: int, seed: int | None = None, grid_resolution: int | None = None,
+              cache: str | Path | None = None, base: str | Path = ".", device: str = "cpu",
+              progress: Progress | None = None) -> BatchResult:
+    """Processed objects -> evaluated rows (see the module docstring).
+
+    ``hand``: a `datagen.hands.HandModel` on ``device``; ``tasks``: `TaskSpec`s or names/YAML
+    paths (`datagen.tasks.load_task`); ``synth_cfg`` (`SynthConfig`) with its seed replaced by
+    ``seed`` when given; ``eval_cfg`` (`EvalConfig`); ``grasps_per_object`` per object and scale;
+    ``grid_resolution`` and ``cache``: see `build_targets`; ``base``: the directory the objects'
+    ``object_path`` values are relative to. ``progress(done, total)`` in work units: one per
+    object's target, then per task as many for its synthesis (moving with its iterations) and as
+    many again for its evaluation as there are objects x scales."""
+    from datagen.tasks import load_task, task_targets
+
+    timings = {"target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0}
+    fails: list[dict] = []
+    tables: list[pa.Table] = []
+    if seed is not None:
+        synth_cfg = dataclasses.replace(synth_cfg, seed=seed)
+    n_targets = sum(len(o.scales) for o in objects)
+    total = len(objects) + 2 * len(tasks) * n_targets
+    done = 0.0
+
+    def report(units: float, absolute: bool = False) -> None:
+        nonlocal done
+        done = units if absolute else done + units
+        if progress is not None:
+            progress(min(done, total), total)
+
+    t0 = time.perf_counter()
+    all_targets = build_targets(objects, grid_resolution=grid_resolution, cache=cache, device=device,
+                                failures=fails, progress=lambda: report(1))
+    timings["target_s"] = time.perf_counter() - t0
+    report(len(objects), absolute=True)
+    splits = {o.object_id: o.split for o in objects}
+    for k, task in enumerate(tasks):
+        report(len(objects) + 2 * k * n_targets, absolute=True)
+        task = load_task(task) if isinstance(task, (str, Path)) else task
+        targets = task_targets(task, all_targets)
+        if not targets:
+            continue
+        t0 = time.perf_counter()
+        start = done
+
+        def moved(it, *_):  # progress per optimizer iteration (reads nothing of the state)
+            report(start + n_targets * (it + 1) / max(synth_cfg.iters, 1), absolute=True)
+
+        try:
+            _, table = synthesize_rows(hand, targets, task, synth_cfg, grasps_per_object, splits=splits,
+                                       callback=moved)
+        except Exception as exc:  # noqa: BLE001 - the batch's objects fail, the other tasks go on
+            for t in targets:
+                fails.append(failure(t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "
+                                     f"{task.name}: {type(exc).__name__}: {exc}", t.scale, task.name))
+            timings["synth_s"] += time.perf_counter() - t0
+            continue
+        timings["synth_s"] += time.perf_counter() - t0
+        report(start + n_targets, absolute=True)
+        t0 = time.perf_counter()
+        tables += evaluate_rows(table, targets, task.name, eval_cfg, base=base, failures=fails,
+                                progress=lambda: report(n_targets / len(targets)))
+        timings["eval_s"] += time.perf_counter() - t0
+    schema = arrow_schema("evaluated", nq=7 + hand.num_joints).remove_metadata()
+    rows = (pa.concat_tables([tb.select(schema.names).cast(schema) for tb in tables]) if tables
+            else schema.empty_table())
+    report(total, absolute=True)
+    return BatchResult(rows, fails, timings)
