@@ -92,20 +92,42 @@ def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) ->
     return dist
 
 
-def _link_bounds(hand):
+def _sphere_clusters(link: torch.Tensor, local: torch.Tensor, size: int) -> torch.Tensor:
+    """(S,) cluster id of each sphere: a link's spheres split into ``ceil(n / size)`` clusters
+    around farthest-point seeds of their local centres (deterministic); ids are dense, per link."""
+    out = torch.empty_like(link)
+    nxt = 0
+    for li in torch.unique(link).tolist():
+        idx = (link == li).nonzero().squeeze(-1)
+        c = local[idx]
+        k = max(1, -(-idx.numel() // size))
+        seeds = [0]
+        d = (c - c[0]).norm(dim=-1)
+        while len(seeds) < k:
+            seeds.append(int(d.argmax()))
+            d = torch.minimum(d, (c - c[seeds[-1]]).norm(dim=-1))
+        out[idx] = nxt + torch.cdist(c, c[seeds]).argmin(-1)
+        nxt += k
+    return out
+
+
+def _link_bounds(hand, cluster_size: int = 4):
     """Broad phase of the self-collision pairs, computed once per hand and kept on it.
 
-    Returns ``(groups (G, 2) link ids, members (G, M) sphere-pair indices of each group padded with
-    -1, link_radius (L,) m, sphere_link (S,), link_count (L,))``: a group is a link pair that has
-    sphere pairs; a link's bounding sphere is centred at the mean of its sphere centres (a rigid
-    motion keeps that point the mean) with the radius enclosing every sphere of the link."""
+    Each link's spheres are split into clusters of about ``cluster_size`` neighbouring spheres
+    (4: LEAP 19.2 -> 1.9 ms per grasp-iteration, 8: 2.3, 16: 3.3, whole links: 19.2).
+    Returns ``(groups (G, 2) cluster ids, members (G, M) sphere-pair indices of each group padded
+    with -1, cluster_radius (C,) m, sphere_cluster (S,), cluster_count (C,))``: a group is a
+    cluster pair that has sphere pairs; a cluster's bounding sphere is centred at the mean of its
+    sphere centres (a rigid motion of the link keeps that point the mean) with the radius
+    enclosing every sphere of the cluster."""
     cached = getattr(hand, "_self_pair_bounds", None)
     if cached is not None and cached[1].device == hand.self_collision_pairs.device:
         return cached
-    link = hand.sphere_link_index
+    local = hand.sphere_centres_local
+    link = _sphere_clusters(hand.sphere_link_index.cpu(), local.cpu(), cluster_size).to(local.device)
     L = int(link.max()) + 1 if link.numel() else 1
     count = torch.bincount(link, minlength=L).clamp_min(1)
-    local = hand.sphere_centres_local
     mean = torch.zeros(L, 3, dtype=local.dtype, device=local.device).index_add_(0, link, local) / count[:, None]
     reach = (local - mean[link]).norm(dim=-1) + hand.sphere_radii
     radius = torch.zeros(L, dtype=local.dtype, device=local.device).scatter_reduce_(0, link, reach, "amax")
@@ -125,9 +147,10 @@ def _link_bounds(hand):
 
 def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
     """(B,) summed squared overlap (m^2) of the self-collision sphere pairs, from already posed
-    spheres ``(B, S, 3)``. A pair is evaluated only in the poses where its two links' bounding
-    spheres overlap (elsewhere its overlap is 0), so the sum equals the all-pairs sum exactly;
-    LEAP's 280k sphere pairs made the all-pairs term 30x the cost of the rest of an iteration."""
+    spheres ``(B, S, 3)``. A pair is evaluated only in the poses where the bounding spheres of its
+    two sphere clusters (about 4 neighbouring spheres of one link each) overlap (elsewhere its
+    overlap is 0), so the sum equals the all-pairs sum exactly; LEAP's 280k sphere pairs made the
+    all-pairs term 30x the cost of the rest of an iteration, and whole-link bounds ~17x."""
     B = centres.shape[0]
     out = centres.new_zeros(B)
     if hand.self_collision_pairs.shape[0] == 0:
