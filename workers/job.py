@@ -37,6 +37,7 @@ from typing import Any, ClassVar, Mapping
 
 
 from datagen._atomic import atomic_write_text
+from datagen.objects.manifest import NATIVE
 from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
 from datagen.synth.config import FORCE_CLOSURE_SEEDS
@@ -84,8 +85,9 @@ class JobConfig(Config):
 
     source: str = "procedural"          #: object source URI (datagen.objects.sources)
     count: int = 6                      #: objects (SCALE)
-    scales: tuple[float, ...] = (0.06, 0.08)  #: object scales, metres (of a built manifest; a given
-                                        #: manifest's own scales are used as they are)
+    scales: tuple[float | str, ...] = (0.06, 0.08)  #: object scales, metres, or "native" (the meshes' own
+                                        #: size); of a built manifest: a given manifest's own scales are used
+
     test_fraction: float = 0.1          #: manifest split
     manifest: str = ""                  #: existing manifest file (its first `count` objects); "" = build
     hand: str = "shadow"                #: built-in hand name or hand spec YAML path
@@ -113,10 +115,13 @@ class JobConfig(Config):
         if isinstance(self.tasks, str):
             object.__setattr__(self, "tasks", (self.tasks,))
         need(all(t for t in self.tasks), f"tasks must be names or paths, got {self.tasks!r}")
-        object.__setattr__(self, "scales", tuple(float(s) for s in self.scales))
+        need(all(s == NATIVE or (isinstance(s, (int, float)) and not isinstance(s, bool)) for s in self.scales),
+             f"scales must be numbers (metres) or 'native', got {self.scales}")
+        object.__setattr__(self, "scales", tuple(s if s == NATIVE else float(s) for s in self.scales))
         object.__setattr__(self, "tasks", tuple(self.tasks))
         need(self.count >= 1, f"count must be an int >= 1, got {self.count!r}")
-        need(bool(self.scales) and min(self.scales) > 0 and max(self.scales) < 10,
+        numeric = [s for s in self.scales if s != NATIVE]
+        need(bool(self.scales) and all(0 < s < 10 for s in numeric),
              f"scales must be in (0, 10) metres, got {self.scales}")
         need(len(set(self.scales)) == len(self.scales), f"scales must be distinct, got {self.scales}")
         need(0 <= self.test_fraction <= 1, f"test_fraction must be in [0, 1], got {self.test_fraction}")

@@ -114,7 +114,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     import torch
 
     from datagen.objects.isolate import process_isolated
-    from datagen.objects.manifest import ManifestEntry
+    from datagen.objects.errors import ObjectError
+    from datagen.objects.manifest import ManifestEntry, resolve_scales
     from datagen.objects.process import load_processed
     from datagen.pipeline import BatchObject, run_batch
 
@@ -144,8 +145,11 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
             rel = _link_into_job(p, job)
             # the manifest's id, hash and scales (a built manifest has the config's); the object
             # path relative to the job directory
-            ready.append(BatchObject(load_processed(job.path / rel), e.scales, object_id=e.id, object_path=rel,
-                                     mesh_sha256=e.sha256, split=e.split))
+            processed = load_processed(job.path / rel)
+            ready.append(BatchObject(processed, resolve_scales(e.scales, processed.factor, e.id), object_id=e.id,
+                                     object_path=rel, mesh_sha256=e.sha256, split=e.split))
+        except ObjectError as exc:  # e.g. scale "native" on a mesh that is not in metres
+            _failure(fails, index, e.id, "process", exc.reason.value, str(exc))
         except Exception as exc:  # noqa: BLE001 - recorded, never fatal
             _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
         finally:

@@ -16,12 +16,23 @@ def register_manifest(sub: argparse._SubParsersAction) -> None:
                    help="procedural[:SEED] | tasks | dexgraspnet:PATH | dir:PATH | pybullet")
     b.add_argument("--count", type=int, default=None, help="number of objects (all files if omitted)")
     b.add_argument("--out", required=True, help="output manifest, e.g. manifests/NAME.jsonl")
-    b.add_argument("--scales", type=float, nargs="+", default=None, help="object scales (metres)")
+    b.add_argument("--scales", type=_scale_arg, nargs="+", default=None,
+                   help="object scales: metres per normalized unit (the bounding-box diagonal is 2 scale), "
+                        "or 'native' to keep the mesh's own size (its coordinates in metres)")
     b.add_argument("--test-fraction", type=float, default=0.1, help="share of objects in the test split")
     b.set_defaults(func=_manifest_build)
     c = msub.add_parser("check", help="validate a manifest")
     c.add_argument("manifest", help="manifest file (JSONL)")
     c.set_defaults(func=_manifest_check)
+
+
+def _scale_arg(text: str):
+    if text == "native":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a scale is a number of metres or 'native', got {text!r}") from None
 
 
 def _manifest_build(args) -> int:

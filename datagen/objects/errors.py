@@ -33,6 +33,7 @@ class Reason(str, enum.Enum):
     SHA_MISMATCH = "sha256_mismatch"         # the file changed since the manifest was built
     TIMEOUT = "timeout"                      # processing exceeded its time limit (isolate.py)
     CRASHED = "crashed"                      # the processing process died (isolate.py)
+    NATIVE_SIZE = "native_size_out_of_range"  # scale "native" on a mesh whose units are not metres
     # manifest-level reasons
     MALFORMED_LINE = "malformed_line"        # not a JSON object
     SCHEMA = "schema"                        # missing/extra/mistyped field

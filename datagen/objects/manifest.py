@@ -4,7 +4,12 @@ Line schema (all fields required, no others)::
 
     {"id": str, "source": str (canonical source URI), "path": str (relative to the source root;
      procedural: the index), "family": str ("" for files), "sha256": str (64 hex, raw mesh bytes),
-     "scales": [float, ...] (metres, > 0), "split": "train" | "test"}
+     "scales": [float | "native", ...], "split": "train" | "test"}
+
+A scale is the object's size: metres per normalized unit (objects are normalized so that their
+bounding-box diagonal is 2, so a scale s makes that diagonal 2 s metres). ``"native"`` keeps the
+mesh's own size, its coordinates read as metres: the scale becomes half the raw bounding-box
+diagonal once the object is processed (`resolve_scales`). A lemon stays a lemon and a bowl a bowl.
 
 The split is a function of the id alone (``split_of``), so it is stable when objects are added.
 """
@@ -27,10 +32,41 @@ from .sources import ObjectRef, canonical_source, iter_source, resolve
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_SCALES", "ManifestEntry", "Rejected", "split_of", "build_manifest", "write_manifest",
-           "load_manifest"]
+__all__ = ["DEFAULT_SCALES", "NATIVE", "ManifestEntry", "Rejected", "split_of", "build_manifest", "write_manifest",
+           "load_manifest", "resolve_scales"]
 
 DEFAULT_SCALES = (0.06, 0.08, 0.10, 0.12)
+NATIVE = "native"  #: the scale that keeps a mesh's own size (coordinates in metres)
+NATIVE_DIAGONAL_M = (0.01, 2.0)  #: a native bounding-box diagonal outside this is not an object in metres
+
+
+def _scale_ok(s) -> bool:
+    return s == NATIVE or (isinstance(s, (int, float)) and not isinstance(s, bool) and 0 < s < 10)
+
+
+def _scale_value(s):
+    return s if s == NATIVE else float(s)
+
+
+def resolve_scales(scales: Iterable, factor: float, object_id: str) -> tuple[float, ...]:
+    """Manifest ``scales`` in metres per normalized unit, ``"native"`` replaced by the object's own
+    size ``1 / factor`` (``factor``: the processed object's raw-to-normalized factor; see
+    `datagen.objects.ProcessedObject`). Raises `ManifestError` (reason ``native_size_out_of_range``)
+    naming the object when its native bounding-box diagonal is outside `NATIVE_DIAGONAL_M`."""
+    out = []
+    for s in scales:
+        if s == NATIVE:
+            diagonal = 2.0 / float(factor)
+            lo, hi = NATIVE_DIAGONAL_M
+            if not lo <= diagonal <= hi:
+                raise ManifestError(Reason.NATIVE_SIZE, object_id,
+                                    f"scale 'native' reads the mesh's coordinates as metres, but its bounding-box "
+                                    f"diagonal is {diagonal:.4g} of its units, outside [{lo}, {hi}] m (a mesh in "
+                                    f"millimetres or normalized?); give this object numeric scales (metres)")
+            s = 1.0 / float(factor)
+        if float(s) not in out:
+            out.append(float(s))
+    return tuple(out)
 _FIELDS = {"id": str, "source": str, "path": str, "family": str, "sha256": str, "scales": list,
            "split": str}
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,199}$")
@@ -84,9 +120,10 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
     source root) are appended to ``rejected`` as `Rejected`, or, when it is None, logged as
     warnings (logger ``datagen.objects.manifest``; the command line prints them on stderr). ``count`` counts accepted objects (a rejected file does not take an object's place).
     Objects of the ``tasks`` source get their own scale instead of ``scales``."""
-    scales = tuple(float(s) for s in scales)
-    if not scales or min(scales) <= 0:
-        raise ValueError(f"manifest scales must be positive metres, got {scales}")
+    scales = tuple(scales)
+    if not scales or not all(_scale_ok(s) for s in scales):
+        raise ValueError(f"manifest scales must be positive metres or 'native', got {scales}")
+    scales = tuple(_scale_value(s) for s in scales)
     if len(set(scales)) != len(scales):
         raise ValueError(f"manifest scales must be distinct, got {scales}")
     if not 0 <= test_fraction <= 1:
@@ -154,15 +191,14 @@ def _entry(obj, where: str, check_paths: bool = True) -> ManifestEntry:
     if not _SHA.match(obj["sha256"]):
         raise ManifestError(Reason.SCHEMA, where, "sha256 must be 64 lowercase hex digits")
     sc = obj["scales"]
-    if not sc or not all(isinstance(s, (int, float)) and not isinstance(s, bool) and 0 < s < 10
-                         for s in sc):
-        raise ManifestError(Reason.SCHEMA, where, f"scales must be numbers in (0, 10) metres, got {sc}")
+    if not sc or not all(_scale_ok(s) for s in sc):
+        raise ManifestError(Reason.SCHEMA, where, f"scales must be numbers in (0, 10) metres or 'native', got {sc}")
     if len(set(sc)) != len(sc):
         raise ManifestError(Reason.SCHEMA, where, f"scales must be distinct, got {sc}")
     if obj["split"] not in ("train", "test"):
         raise ManifestError(Reason.SCHEMA, where, f"split must be 'train' or 'test', got {obj['split']!r}")
     e = ManifestEntry(obj["id"], obj["source"], obj["path"], obj["family"], obj["sha256"],
-                      tuple(float(s) for s in sc), obj["split"])
+                      tuple(_scale_value(s) for s in sc), obj["split"])
     try:
         canonical_source(e.source)  # source known
         if check_paths:

@@ -116,3 +116,22 @@ def test_status_and_report(done_job, capsys):
         assert f"![renders/{pics[0].name}]" in card
     else:
         assert "No grasp pictures" in card
+
+
+def test_native_scale_rows_and_a_mesh_not_in_metres(tmp_path, cache_dir):
+    import numpy as np
+    import trimesh
+
+    root = tmp_path / "meshes"
+    root.mkdir()
+    trimesh.creation.box((0.1, 0.06, 0.04)).export(root / "a_box_m.obj")  # metres
+    trimesh.creation.box((100.0, 60.0, 40.0)).export(root / "b_box_mm.obj")  # millimetres
+    cfg = tiny_config(f"dir:{root}", count=2, scales=("native",))
+    job = run_all(tmp_path / "job", cfg, cache_dir)
+    rows = comparable_rows(job.path)
+    assert {r["object_id"] for r in rows} == {"a_box_m.obj"}
+    half_diagonal = np.sqrt(0.1 ** 2 + 0.06 ** 2 + 0.04 ** 2) / 2
+    assert all(abs(r["object_scale_m"] - half_diagonal) < 1e-6 for r in rows)
+    fails = pq.read_table(job.failures_path).to_pylist()
+    assert [(f["object_id"], f["reason"]) for f in fails] == [("b_box_mm.obj", "native_size_out_of_range")]
+    assert "millimetres" in fails[0]["message"]
