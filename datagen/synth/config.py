@@ -65,13 +65,14 @@ class SynthConfig(Config):
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
+    seeds_kept: int = 1  #: seeds of each grasp that go on after seed_select_iter; the best of them at the end
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     seed: int = 0
 
     def __post_init__(self):
-        if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
-            raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
-                              f"got {self.seeds_per_grasp}, {self.seed_select_iter}")
+        if self.seeds_per_grasp < 1 or self.seed_select_iter < 1 or self.seeds_kept < 1:
+            raise ConfigError(f"SynthConfig: seeds_per_grasp, seed_select_iter and seeds_kept must be >= 1, "
+                              f"got {self.seeds_per_grasp}, {self.seed_select_iter}, {self.seeds_kept}")
         if self.iters < 1 or self.num_directions < 1:
             raise ConfigError(f"SynthConfig: iters and num_directions must be >= 1, got {self.iters}, {self.num_directions}")
         if self.task_energy_kind not in ("cos", "l2"):

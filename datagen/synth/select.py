@@ -18,7 +18,7 @@ import torch
 from datagen.synth.energies import _query_targets, hand_object_state
 from datagen.wrench import epsilon_metric
 
-__all__ = ["best_seeds", "link_contacts", "link_epsilon"]
+__all__ = ["best_seeds", "link_contacts", "link_epsilon", "seed_scores", "top_seeds"]
 
 
 def link_contacts(hand, targets, index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
@@ -56,12 +56,12 @@ def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Te
     return eps
 
 
-def best_seeds(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
-               energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg, S: int) -> torch.Tensor:
-    """(B,) row of the best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1``): force
-    closure (gamma 180 deg): the largest whole-hand epsilon among seeds whose task fingertips
-    are in contact, ties (e.g. none in closure) broken by the lower energy; other tasks: the
-    lowest energy. ``root (B S, 7)``, ``joints (B S, J)`` coupled, ``energy (B S,)``."""
+def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
+                energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg) -> torch.Tensor:
+    """``(N,)`` how promising each pose is (higher is better): force closure (gamma 180 deg): the
+    whole-hand epsilon of poses whose task fingertips are in contact, ties (e.g. none in closure)
+    broken by the lower energy; other tasks: minus the energy. ``root (N, 7)``, ``joints (N, J)``
+    coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target."""
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         if task.gamma_deg >= 180 and tip_spheres.numel() > 1:
@@ -71,5 +71,18 @@ def best_seeds(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, join
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
             eps = link_epsilon(p, n, touching, cfg.mu, normalize=cfg.normalize).to(energy.dtype)
             score = score + 1e3 * torch.where(usable, eps, torch.zeros_like(eps))
-        rows = score.reshape(-1, S).argmax(-1)
-        return torch.arange(rows.shape[0], device=rows.device) * S + rows
+        return score
+
+
+def top_seeds(score: torch.Tensor, S: int, k: int = 1) -> torch.Tensor:
+    """``(B k,)`` rows of the ``k`` best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1``
+    of ``score (B S,)``), best first within each grasp."""
+    s = score.reshape(-1, S)
+    rows = s.argmax(-1, keepdim=True) if k == 1 else s.topk(min(k, S), dim=-1).indices  # (B, k)
+    return (rows + torch.arange(rows.shape[0], device=rows.device)[:, None] * S).reshape(-1)
+
+
+def best_seeds(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
+               energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg, S: int) -> torch.Tensor:
+    """(B,) row of the best of each grasp's ``S`` seeds by :func:`seed_scores`."""
+    return top_seeds(seed_scores(hand, targets, seed_index, root, joints, energy, tip_spheres, task, cfg), S)

@@ -26,7 +26,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
-from datagen.synth.select import best_seeds, link_contacts
+from datagen.synth.select import link_contacts, seed_scores, top_seeds
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
@@ -133,17 +133,24 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
                          momentum=cfg.momentum, step_decay=cfg.step_decay, decay_every=cfg.decay_every,
                          project=hand.apply_couplings)
     x = PoseVariables(root[:, :3].clone(), root[:, 3:].clone(), joints.clone())
-    first = 0
-    if S > 1:  # multi-start: every seed runs the first iterations, the best seed of each grasp goes on
+    first, K, run_index = 0, 1, object_index
+    if S > 1:  # multi-start: every seed runs the first iterations, the best seeds of each grasp go on
         first = min(cfg.seed_select_iter, cfg.iters)
+        K = min(cfg.seeds_kept, S)
         x, e, extras = opt.run(energy_on(seed_index), x, first, callback=callback)
-        best = best_seeds(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                          tip_spheres, task, cfg, S)
+        keep = top_seeds(seed_scores(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
+                                     tip_spheres, task, cfg), S, K)
+        x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
+        root, joints, e = root[keep], joints[keep], e[keep]
+        extras = {k: v[keep] for k, v in extras.items()}
+        run_index = object_index.repeat_interleave(K)
+    if cfg.iters > first:
+        x, e, extras = opt.run(energy_on(run_index), x, cfg.iters - first, callback=callback, first_iter=first)
+    if K > 1:  # the kept seeds ran to the end: the best of them by the same score
+        best = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
+                                     tip_spheres, task, cfg), K)
         x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
         root, joints = root[best], joints[best]
-    if cfg.iters > first:
-        x, _, extras = opt.run(energy_on(object_index), x, cfg.iters - first, callback=callback, first_iter=first)
-    else:
         extras = {k: v[best] for k, v in extras.items()}
     t_opt = time.perf_counter() - t0
 

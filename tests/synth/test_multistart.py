@@ -114,3 +114,37 @@ def test_multistart_outputs_one_grasp_per_slot_and_raises_epsilon(hand, box):
         assert torch.isclose(starts[b], many.initial[b]).all(-1).any(), f"slot {b} did not start from its seeds"
     assert float(many.epsilon.mean()) >= float(one.epsilon.mean())
     assert int((many.epsilon > 0).sum()) >= int((one.epsilon > 0).sum())
+
+
+def test_kept_seeds_run_to_the_end_and_the_best_is_chosen_there(hand, box):
+    """seeds_kept K: the K best seeds of each grasp at seed_select_iter go on to the last
+    iteration, where the one of largest score wins. Captured through the optimizer callback: the
+    output grasp must be, of its grasp's K final poses, the one with the largest score, and its
+    initial pose one of its own seeds."""
+    from datagen.synth.select import seed_scores
+
+    task = load_task("force_closure")
+    S, K, B, iters, sel = 3, 2, 2, 16, 8
+    cfg = SynthConfig(iters=iters, seed=3, seeds_per_grasp=S, seeds_kept=K, seed_select_iter=sel)
+    last = {}
+
+    def capture(it, x, e, ok):
+        if it == iters - 1:
+            last.update(x=x, e=e.clone())
+
+    res = synthesize(hand, [box], task, cfg, B, callback=capture)
+    x = last["x"]
+    assert x.translation.shape[0] == B * K  # only the kept seeds ran the second phase
+    joints = hand.apply_couplings(x.joints)
+    index = torch.zeros(B * K, dtype=torch.long)
+    score = seed_scores(hand, [box], index, x.root_pose(), joints, last["e"], contact_sphere_index(hand), task,
+                        cfg).reshape(B, K)
+    gen = torch.Generator().manual_seed(3)
+    starts, _ = initial_poses(hand, [box], torch.zeros(B * S, dtype=torch.long), task.init, gen,
+                              tip_index=list(range(5)))
+    for b in range(B):
+        k = int(score[b].argmax())
+        assert torch.allclose(res.grasp[b, 7:], joints[b * K + k], atol=1e-6)
+        assert torch.allclose(res.grasp[b, :3], x.translation[b * K + k], atol=1e-7)
+        own = starts[b * S:(b + 1) * S, :3]
+        assert (own - res.initial[b, :3]).norm(dim=-1).min() < 1e-6
