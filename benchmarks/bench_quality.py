@@ -86,7 +86,7 @@ def summarize(rows: dict, sel: np.ndarray) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hands", default=",".join(HANDS), help="comma-separated hands")
-    ap.add_argument("--grasps", default="shadow=8,shadow_e3m5=4,allegro=4,leap=1",
+    ap.add_argument("--grasps", default="shadow=8,shadow_e3m5=4,allegro=4,leap=4",
                     help="grasps per object and scale, per hand (HAND=N,...; a plain N for every hand)")
     ap.add_argument("--objects", type=int, default=14, help="objects of the manifest (first N)")
     ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")

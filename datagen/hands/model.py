@@ -84,6 +84,7 @@ class HandModel:
         self.fingertip_names: list[str] = list(spec.fingertips)
         tips = list(spec.fingertips.values())
         self.palm_link = need_link(spec.palm.link, "palm")
+        self.sphere_margin_m: float = spec.sphere_margin_m
         self._couple = [(need_joint(c.joint, "couplings"), need_joint(c.leader, "couplings"), c.ratio, c.offset)
                         for c in spec.couplings]
         open_pose = np.clip(np.zeros(m.njnt), lo, hi)

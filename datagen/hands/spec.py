@@ -176,6 +176,12 @@ class HandSpec:
     self_collision_pairs: tuple[SelfCollisionPair, ...] = ()
     sphere_fit: SphereFitConfig = field(default_factory=SphereFitConfig)
     position_actuator_kp: float = 5.0  # gain of the position actuators added when the source has none
+    # How far (m) synthesis lets this hand's collision spheres sink into the object before they
+    # count as penetrating: where the spheres overshoot the hand's collision geometry, a sunk sphere
+    # is a real link just touching. Shadow's coarse fit (429 spheres) needs 1.5 mm; Allegro's fine
+    # one (792) penetrates 1.2 mm at p90 in MuJoCo with that, 0.03 mm with 0.5 mm, at the same
+    # success (benchmarks/results/quality.md). SynthConfig.sphere_margin_m overrides it.
+    sphere_margin_m: float = 0.0015
     source_file: str | None = None  # the YAML this spec was read from, for error messages
 
     def __post_init__(self) -> None:
@@ -200,6 +206,8 @@ class HandSpec:
                                         f"sphere indices {list(idx)[:5]}... are out of range")
         if self.position_actuator_kp <= 0:
             raise HandSpecError(p, "position_actuator_kp must be > 0")
+        if not 0 <= self.sphere_margin_m < 0.01:
+            raise HandSpecError(p, f"sphere_margin_m must be in [0, 0.01) m, got {self.sphere_margin_m}")
 
     # ------------------------------------------------------------------ YAML round trip
     @classmethod
@@ -212,7 +220,7 @@ class HandSpec:
         if version != SPEC_VERSION:
             raise HandSpecError(p, f"spec version {version!r} is not supported (expected {SPEC_VERSION})")
         known = {"version", "name", "mjcf", "root_body", "spheres", "fingertips", "palm", "open_pose",
-                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp"}
+                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp", "sphere_margin_m"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise HandSpecError(p, f"unknown keys {unknown}", f"allowed keys: {sorted(known)}")
@@ -276,7 +284,8 @@ class HandSpec:
                 name=str(data["name"]), mjcf=mjcf, root_body=str(data["root_body"]), spheres=spheres,
                 fingertips=tips, palm=palm, open_pose=open_pose, couplings=couplings,
                 self_collision_pairs=tuple(pairs), sphere_fit=fit,
-                position_actuator_kp=float(data.get("position_actuator_kp", 5.0)), source_file=p,
+                position_actuator_kp=float(data.get("position_actuator_kp", 5.0)),
+                sphere_margin_m=float(data.get("sphere_margin_m", 0.0015)), source_file=p,
             )
         except HandSpecError as exc:
             if exc.path is None and p is not None:
@@ -307,6 +316,7 @@ class HandSpec:
             "couplings": [{"joint": c.joint, "leader": c.leader, "ratio": round(c.ratio, 6),
                            "offset": round(c.offset, 6)} for c in self.couplings],
             "position_actuator_kp": self.position_actuator_kp,
+            "sphere_margin_m": self.sphere_margin_m,
             "sphere_fit": {"overshoot": self.sphere_fit.overshoot, "coverage": self.sphere_fit.coverage,
                            "max_spheres_per_link": self.sphere_fit.max_spheres_per_link,
                            "samples_per_link": self.sphere_fit.samples_per_link, "seed": self.sphere_fit.seed},

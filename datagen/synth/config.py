@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, fields
 
@@ -61,7 +62,7 @@ class SynthConfig(Config):
     squeeze_m: float = 0.01  #: "normal": fingertips move this far out (pregrasp) / in (squeeze) along the normals
     squeeze_rad: float = 0.1  #: "joint": pregrasp opens each joint by up to this towards the open pose
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
-    sphere_margin_m: float = 0.0015  #: spheres overshoot the hand's collision shapes (<= 2.8 mm): they may sink this far
+    sphere_margin_m: float | None = None  #: m collision spheres may sink into the object (None: the hand spec's, see for_hand)
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
@@ -69,7 +70,16 @@ class SynthConfig(Config):
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     seed: int = 0
 
+    def for_hand(self, hand) -> "SynthConfig":
+        """This config with the hand's own values where it leaves them open (``sphere_margin_m``:
+        how far the hand's collision spheres overshoot its collision geometry, from its spec)."""
+        if self.sphere_margin_m is None:
+            return dataclasses.replace(self, sphere_margin_m=float(hand.sphere_margin_m))
+        return self
+
     def __post_init__(self):
+        if self.sphere_margin_m is not None and not 0 <= self.sphere_margin_m < 0.01:
+            raise ConfigError(f"SynthConfig.sphere_margin_m must be in [0, 0.01) m or null, got {self.sphere_margin_m}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1 or self.seeds_kept < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp, seed_select_iter and seeds_kept must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}, {self.seeds_kept}")

@@ -226,6 +226,8 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) 
         ) / directions.shape[0]
     else:
         e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])
+    if cfg.sphere_margin_m is None:
+        raise ValueError("evaluate_state needs a SynthConfig resolved for its hand (SynthConfig.for_hand)")
     e_dist = ((state.tip_distance + cfg.sphere_margin_m) ** 2).sum(-1)
     total = (w.task * e_task + w.distance * e_dist + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)

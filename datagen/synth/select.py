@@ -62,6 +62,7 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
     whole-hand epsilon of poses whose task fingertips are in contact, ties (e.g. none in closure)
     broken by the lower energy; other tasks: minus the energy. ``root (N, 7)``, ``joints (N, J)``
     coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target."""
+    cfg = cfg.for_hand(hand)
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         if task.gamma_deg >= 180 and tip_spheres.numel() > 1:

@@ -67,6 +67,7 @@ def test_task_energy_decreases_from_the_initial_pose(hand, box, fc_run):
     idx = list(range(5))
     init = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.initial[:6, :7], res.initial[:6, 7:], spheres[idx])
     final = hand_object_state(hand, [box], torch.zeros(6, dtype=torch.long), res.grasp[:6, :7], res.grasp[:6, 7:], spheres[idx])
+    cfg = cfg.for_hand(hand)
     e0, e1 = evaluate_state(init, cfg, task, dirs), evaluate_state(final, cfg, task, dirs)
     assert e1.task.mean() < e0.task.mean() - 0.05
     assert (e1.total < e0.total).all()
