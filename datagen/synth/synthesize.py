@@ -106,6 +106,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     import time
 
     t0 = time.perf_counter()
+    task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
     gen = generator or torch.Generator().manual_seed(cfg.seed)
     dev, dt = hand.device, hand.dtype
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)

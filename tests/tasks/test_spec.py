@@ -43,3 +43,30 @@ def test_tasks_pair_with_their_objects():
     assert [t.object_id for t in task_targets(load_task("pull_drawer"), targets)] == ["task-drawer"]
     assert task_targets(load_task("force_closure"), targets) == targets
     assert task_targets(load_task("precision_key"), targets) == []  # its object is not among them
+
+
+def test_hands_block_overrides_init_and_fingers_for_that_hand_only(tmp_path):
+    p = tmp_path / "h.yaml"
+    p.write_text("name: h\nfingers: [th, ff, mf]\ninit: {kind: approach, curl: 0.3, target_m: [0, 0, 0.01]}\n"
+                 "hands:\n  allegro: {init: {curl: 0.5, target_m: [0.0, 0.02, 0.0]}, fingers: [th, ff]}\n"
+                 "  leap: {init: {aim: fingertips}}\n")
+    spec = load_task(p)
+    a = spec.for_hand("allegro")
+    assert (a.init.curl, a.init.target_m, a.fingers) == (0.5, (0.0, 0.02, 0.0), ("th", "ff"))
+    assert a.init.kind == "approach" and a.hands == {}  # the rest is the task's
+    leap = spec.for_hand("leap")
+    assert (leap.init.aim, leap.init.curl, leap.fingers) == ("fingertips", 0.3, ("th", "ff", "mf"))
+    shadow = spec.for_hand("shadow")
+    assert (shadow.init, shadow.fingers) == (spec.init, spec.fingers)
+    p.write_text(yaml.safe_dump(spec.to_dict()))
+    assert load_task(p) == spec  # round-trips with its hands block
+
+
+@pytest.mark.parametrize("block, field", [("allegro: {init: {curll: 0.5}}", "curll"),
+                                          ("allegro: {init: {curl: 2.0}}", "curl"),
+                                          ("allegro: {finger: [th]}", "finger")])
+def test_bad_hands_block_names_the_field(tmp_path, block, field):
+    p = tmp_path / "h.yaml"
+    p.write_text(f"name: h\nhands:\n  {block}\n")
+    with pytest.raises(ConfigError, match=field):
+        load_task(p)
