@@ -100,7 +100,8 @@ class PeakRSS:
         self.peak_mb = self.peak - self.base
 
 
-def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool):
+def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool, task=None):
+    """The variant's `SynthConfig`: the task's ``synth`` block, the variant's overrides on top."""
     from datagen.synth import SynthConfig
 
     d = dict(VARIANTS[variant][1], iters=iters, seed=seed)
@@ -109,7 +110,7 @@ def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pe
         w["self_penetration"] = 0.0
     if w:
         d["weights"] = w
-    return SynthConfig.from_dict(d)
+    return SynthConfig.from_dict(task.synth_settings(d) if task is not None else d)
 
 
 class Objects:
@@ -179,7 +180,7 @@ def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects
 
     task = task_for(task_name, init)
     target, pieces = objects.get(task_object(task))
-    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen)
+    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen, task)
     with PeakRSS() as mem:
         t0 = time.perf_counter()
         res = synthesize(hand, [target], task, cfg, num)
