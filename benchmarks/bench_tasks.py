@@ -283,7 +283,11 @@ def render(records: Path, machine: str) -> str:
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
              "six-direction hold test (1 N, 5 cm / 15 deg from the initial pose). Task tests measure the object's motion from "
              "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
-             "Each cell: success % (poses x iterations of that cell in the size table below). Results are grouped by "
+             "Each cell: success % (poses per task in its row, iterations in the runs table). Two initialisation regimes: "
+             "task-specific (each YAML's `init`) and generic (force closure's: palm towards the inflated convex hull, "
+             "the same for every task and variant); a task YAML's `synth` block (e.g. exact contacts, 8 seeds) applies "
+             "to every variant, which only override their own settings. Held task wrench: per pose, the largest "
+             "multiple of the disturbance held (`Evaluator.margin`). Results are grouped by "
              "the code version they ran at; the task table above is the current checkout's (`git log "
              "-- datagen/tasks/specs datagen/synth/tasks` shows what changed between versions; before the house "
              "refactor the YAMLs lived in datagen/synth/tasks).", ""]
