@@ -7,14 +7,27 @@ joint, or the six-direction hold test for precision grasps). Variants:
 
 - ``baseline``: no task energy (weight 0); ``l2``: L2 task energy; ``nocpn``: no contact
   position normalization; ``full``: the method (delta 15 deg, K = 1e2) -- Table II;
-- ``d0_k1e2``, ``d15_k1e4``, ``d0_k1e4``: the hyper-parameter rows (delta, K).
+- ``d0_k1e2``, ``d15_k1e4``, ``d0_k1e4``: the hyper-parameter rows (delta, K);
+- ``baseline_ms``, ``full_ms``: baseline and full with 8 seeds per pose (multi-start as
+  force-closure synthesis runs it; the best seed after 120 iterations goes on).
+
+Two initialisation regimes (``--inits``): ``task``, each task YAML's own initial poses (aimed,
+pre-shaped), and ``generic``, one regime shared by every task and variant: the force-closure
+synthesis's (palm towards the object from a random point of its convex hull inflated 3-6 cm,
+roll +-180 deg, tilt +-15 deg, fingers open; `datagen.tasks.InitConfig` defaults), the regime
+in which the task energy alone must bring the fingertips to where the task wrench is resisted.
+
+Besides pass/fail at the task's magnitude, each pose's largest held multiple of the task's
+disturbance (`datagen.eval.Evaluator.margin`, grid 0.25..32, same thresholds) is recorded;
+the report gives its median and quartiles per task and variant.
 
 Each (hand, variant, task, num, iters) run is stored as a JSON record under ``--records``
 (resumable: existing records are reused unless ``--force``); the report
 ``benchmarks/results/tasks.md`` is rendered from every record there, so partial runs
 (``--tasks``, ``--variants``, ``--hands``, ``--num``) add up. Time = synthesis wall time; memory
 = peak RSS above the process's RSS before that synthesis (sampled every 20 ms).
-Usage: ``make bench-tasks`` (``BENCH_TASKS_ARGS=...``).
+Usage: ``make bench-tasks`` (``BENCH_TASKS_ARGS=...``). It ends with the line
+``tasks-generic: full=F baseline=B`` (ten-task averages, generic initialisation, with N).
 """
 
 from __future__ import annotations
@@ -53,7 +66,13 @@ VARIANTS = {  # name -> (label, SynthConfig overrides)
     "d0_k1e2": ("Ablation4: delta 0, K 1e2", {"delta_deg": 0.0}),
     "d15_k1e4": ("Ablation3: delta 15, K 1e4", {"num_directions": 10_000}),
     "d0_k1e4": ("Ablation5: delta 0, K 1e4", {"delta_deg": 0.0, "num_directions": 10_000}),
+    # multi-start as force-closure synthesis runs it (8 seeds per pose, the best after 120
+    # iterations kept): by the lowest total energy for gamma < 180 deg, where E_t is most of it
+    # once the fingertips touch; by whole-hand epsilon for gamma = 180 (datagen.synth.select)
+    "baseline_ms": ("Baseline, 8 seeds", {"weights": {"task": 0.0}, "seeds_per_grasp": 8}),
+    "full_ms": ("Ours, 8 seeds", {"seeds_per_grasp": 8}),
 }
+TABLE_VARIANTS = ("baseline", "baseline_ms", "l2", "nocpn", "full", "full_ms")
 
 
 def _rss_mb() -> float:
@@ -81,7 +100,8 @@ class PeakRSS:
         self.peak_mb = self.peak - self.base
 
 
-def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool):
+def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool, task=None):
+    """The variant's `SynthConfig`: the task's ``synth`` block, the variant's overrides on top."""
     from datagen.synth import SynthConfig
 
     d = dict(VARIANTS[variant][1], iters=iters, seed=seed)
@@ -90,7 +110,7 @@ def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pe
         w["self_penetration"] = 0.0
     if w:
         d["weights"] = w
-    return SynthConfig.from_dict(d)
+    return SynthConfig.from_dict(task.synth_settings(d) if task is not None else d)
 
 
 class Objects:
@@ -116,20 +136,20 @@ class Objects:
         return self._cache[name]
 
 
-STRESS = (3, 10)  #: disturbance multipliers of the extra robustness columns
+STRESS = (3, 10)  #: disturbance multipliers of the robustness columns of older records
+INITS = ("task", "generic")  #: initialisation regimes (see the module docstring)
 
 
-def stressed_config(task_name: str, k: float):
-    """An `EvalConfig` whose test of ``task_name`` has a ``k`` times larger disturbance."""
-    from datagen.eval import EvalConfig
+def task_for(task_name: str, init: str):
+    """The task spec of ``task_name`` with its own initial poses (``task``) or the generic ones."""
+    from datagen.tasks import InitConfig, load_task
 
-    cfg = EvalConfig()
-    test = cfg.task_test(task_name)
-    if test is None:  # six directions: k times the force
-        return dataclasses.replace(cfg, force_per_kg=k * cfg.force_per_kg)
-    f = test.force_n if test.force_n is not None else cfg.force_per_kg * cfg.object_mass_kg
-    scaled = dataclasses.replace(test, force_n=k * f, torque_nm=None if test.torque_nm is None else k * test.torque_nm)
-    return dataclasses.replace(cfg, tasks={**cfg.tasks, task_name: scaled})
+    spec = load_task(task_name)
+    if init == "generic":
+        return dataclasses.replace(spec, init=InitConfig())
+    if init != "task":
+        raise SystemExit(f"unknown init {init!r}; known: {list(INITS)}")
+    return spec
 
 
 def code_version() -> str:
@@ -152,46 +172,56 @@ def code_version() -> str:
 
 
 def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects: Objects, seed: int,
-               no_self_pen: bool) -> dict:
+               no_self_pen: bool, init: str = "task") -> dict:
     """Synthesize ``num`` poses of one task with one variant and evaluate each; a JSON-able record."""
-    from datagen.eval import EvalConfig, Evaluator
+    from datagen.eval import MULTIPLES, EvalConfig, Evaluator
     from datagen.synth import synthesize
-    from datagen.tasks import load_task, task_object
+    from datagen.tasks import task_object
 
-    task = load_task(task_name)
+    task = task_for(task_name, init)
     target, pieces = objects.get(task_object(task))
-    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen)
+    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen, task)
     with PeakRSS() as mem:
         t0 = time.perf_counter()
         res = synthesize(hand, [target], task, cfg, num)
         synth_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    reasons, success = [], []
-    stress = {k: [] for k in STRESS}
+    reasons, success, held = [], [], []
     poses = [torch.stack([res.pregrasp[b], res.grasp[b], res.squeeze[b]]).double().numpy() for b in range(num)]
     with Evaluator(hand, EvalConfig()) as ev:
         for p in poses:
-            r = ev.evaluate(pieces, p, task=task_name, w_t=task.w_t)
-            reasons.append(r.reason)
-            success.append(bool(r.success))
+            m = ev.margin(pieces, p, task=task_name, w_t=task.w_t)
+            reasons.append(m.result.reason)
+            success.append(bool(m.result.success))
+            held.append(m.held_multiple)
     eval_s = time.perf_counter() - t0
-    for k in STRESS:  # the same poses under a k times larger disturbance (a margin, not the paper's metric)
-        with Evaluator(hand, stressed_config(task_name, k)) as ev:
-            stress[k] = [bool(ok and ev.evaluate(pieces, p, task=task_name, w_t=task.w_t).success)
-                         for p, ok in zip(poses, success)]
     usable = res.usable(cfg.contact_threshold_m)
-    return {"hand": hand.name, "task": task_name, "variant": variant, "num": num, "iters": iters, "seed": seed,
-            "no_self_penetration": no_self_pen, "fingers": res.fingers,
+    e_task = final_task_energy(task, res.contact_points, res.contact_normals)
+    return {"hand": hand.name, "task": task_name, "variant": variant, "init": init, "num": num, "iters": iters,
+            "seed": seed, "no_self_penetration": no_self_pen, "fingers": res.fingers,
             "success": float(np.mean(success)), "reasons": dict(collections.Counter(reasons)),
-            "success_stress": {str(k): float(np.mean(v)) for k, v in stress.items()},
+            "held_multiple": held, "multiples": list(MULTIPLES), "success_per_pose": success,
+            "e_task": None if e_task is None else [float(x) for x in e_task],
             "synth_s": synth_s, "eval_s": eval_s, "peak_mb": mem.peak_mb,
             "tips_in_contact": float(usable.float().mean()),
             "max_penetration_mm_median": float(res.max_penetration.median()) * 1e3,
             "code_version": code_version(), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
-def record_path(records: Path, hand: str, variant: str, task: str, num: int, iters: int) -> Path:
-    return records / f"{code_version()}__{hand}__{variant}__{task}__n{num}__i{iters}.json"
+def final_task_energy(task, points: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
+    """(B,) the full method's E_t (mean cosine; cos, CPN, delta 15 deg, mu 0.5, 1000 fixed directions)
+    at the synthesized contacts, for every variant (the baseline's included): how task-aligned
+    its poses are, whatever it optimized."""
+    from datagen.wrench import sample_directions, task_energy
+
+    dirs = sample_directions(1000, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    with torch.no_grad():
+        return task_energy(points.double(), normals.double(), 0.5, list(task.w_t), task.gamma_deg, dirs) / 1000
+
+
+def record_path(records: Path, hand: str, variant: str, task: str, num: int, iters: int, init: str = "task") -> Path:
+    tag = "" if init == "task" else f"__{init}"
+    return records / f"{code_version()}__{hand}__{variant}__{task}__n{num}__i{iters}{tag}.json"
 
 
 # ----------------------------------------------------------------------------- report
@@ -199,9 +229,9 @@ def _load(records: Path) -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted(records.glob("*.json"))]
 
 
-def _pick(recs, hand, variant, task):
-    """The record with the most poses (then iterations) for (hand, variant, task)."""
-    c = [r for r in recs if (r["hand"], r["variant"], r["task"]) == (hand, variant, task)]
+def _pick(recs, hand, variant, task, init="task"):
+    """The record with the most poses (then iterations) for (hand, variant, task, init)."""
+    c = [r for r in recs if (r["hand"], r["variant"], r["task"], r.get("init", "task")) == (hand, variant, task, init)]
     return max(c, key=lambda r: (r["num"], r["iters"])) if c else None
 
 
@@ -253,7 +283,11 @@ def render(records: Path, machine: str) -> str:
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
              "six-direction hold test (1 N, 5 cm / 15 deg from the initial pose). Task tests measure the object's motion from "
              "its pose once the hand has closed (the paper: hand fixed at the grasp, wrench applied, object unmoved). Paper numbers: Shadow hand, Isaac Gym, RTX 3090. "
-             "Each cell: success % (poses x iterations of that cell in the size table below). Results are grouped by "
+             "Each cell: success % (poses per task in its row, iterations in the runs table). Two initialisation regimes: "
+             "task-specific (each YAML's `init`) and generic (force closure's: palm towards the inflated convex hull, "
+             "the same for every task and variant); a task YAML's `synth` block (e.g. exact contacts, 8 seeds) applies "
+             "to every variant, which only override their own settings. Held task wrench: per pose, the largest "
+             "multiple of the disturbance held (`Evaluator.margin`). Results are grouped by "
              "the code version they ran at; the task table above is the current checkout's (`git log "
              "-- datagen/tasks/specs datagen/synth/tasks` shows what changed between versions; before the house "
              "refactor the YAMLs lived in datagen/synth/tasks).", ""]
@@ -265,28 +299,97 @@ def render(records: Path, machine: str) -> str:
     return "\n".join(lines)
 
 
+def _held_cell(c) -> str:
+    """``median [p25, p75]`` of a record's held multiples, '-' without them."""
+    if not c or "held_multiple" not in c:
+        return "-"
+    q = np.percentile(c["held_multiple"], [50, 25, 75], method="lower")
+    return f"{q[0]:g} [{q[1]:g}, {q[2]:g}]"
+
+
+def _sizes(cells) -> str:
+    ns = sorted({c["num"] for c in cells if c})
+    return "/".join(str(n) for n in ns) if ns else "-"
+
+
+def _energy_vs_test(pick, hand: str, what: str, cut: float = -0.5) -> list[str]:
+    """Does E_t measure what the test needs? Per task, every variant's poses pooled: success
+    among poses whose final E_t (the full method's, ``final_task_energy``) is <= ``cut`` and
+    among the others, and the rank correlation of E_t with the held multiple."""
+    rows = []
+    for t, col in zip(TASKS, COLUMNS):
+        e, ok, held = [], [], []
+        for v in TABLE_VARIANTS:
+            c = pick(v, t)
+            if c and c.get("e_task") and "success_per_pose" in c and len(c["e_task"]) == len(c["success_per_pose"]):
+                e += c["e_task"]
+                ok += c["success_per_pose"]
+                held += c["held_multiple"]
+        if not e:
+            continue
+        e, ok, held = np.array(e), np.array(ok, dtype=float), np.array(held)
+        lo = e <= cut
+        rank = lambda x: np.argsort(np.argsort(x, kind="stable"), kind="stable")  # noqa: E731
+        rho = np.corrcoef(rank(e), rank(held))[0, 1] if e.std() > 0 and held.std() > 0 else float("nan")
+        pct = lambda m: f"{100 * ok[m].mean():.0f} ({int(m.sum())})" if m.any() else "- (0)"  # noqa: E731
+        rows.append(f"| {col} | {pct(lo)} | {pct(~lo)} | {rho:+.2f} |")
+    if not rows:
+        return []
+    return [f"### E_t and the test: {hand}, {what}", "",
+            f"All variants' poses of each task pooled; E_t = the full method's task energy (mean cosine, "
+            f"1000 fixed directions) at each pose's final contacts. Success % (poses) with E_t <= {cut} and "
+            "> cut; Spearman rank correlation of E_t with the held multiple (negative: lower E_t, more held).", "",
+            f"| task | success, E_t <= {cut} | success, E_t > {cut} | rho(E_t, held) |", "|---|---|---|---|",
+            *rows, ""]
+
+
 def _render_version(recs: list[dict]) -> list[str]:
     lines = []
     hands = sorted({r["hand"] for r in recs}, key=lambda h: (h != "shadow", h))
     for hand in hands:
-        lines += [f"## Table II: {hand}", "",
-                  "| variant | " + " | ".join(COLUMNS) + " | average | paper average |",
-                  "|---|" + "---|" * (len(COLUMNS) + 2)]
-        for v in ("baseline", "l2", "nocpn", "full"):
-            cells = [_pick(recs, hand, v, t) for t in TASKS]
-            if not any(cells):
+        for init in INITS:
+            if not any(r.get("init", "task") == init and r["hand"] == hand for r in recs):
                 continue
-            got = [c["success"] for c in cells if c]
-            avg = f"{100 * np.mean(got):.1f}" + ("" if len(got) == len(TASKS) else f" ({len(got)} tasks)")
-            lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_pct(c and c["success"]) for c in cells)
-                         + f" | {avg} | {PAPER[v][1] if hand == 'shadow' else '-'} |")
-            if hand == "shadow":
-                lines.append(f"| paper {v} | " + " | ".join(str(x) for x in PAPER[v][0]) + f" | {PAPER[v][1]} | |")
+            lines += _render_hand(recs, hand, init)
+    return lines
+
+
+def _render_hand(recs: list[dict], hand: str, init: str) -> list[str]:
+    lines = []
+    pick = lambda v, t: _pick(recs, hand, v, t, init)  # noqa: E731
+    what = {"task": "task-specific initial poses", "generic": "generic initial poses (force closure's)"}[init]
+    lines += [f"## Table II: {hand}, {what}", "",
+              "| variant | " + " | ".join(COLUMNS) + " | average | poses per task | paper average |",
+              "|---|" + "---|" * (len(COLUMNS) + 3)]
+    for v in TABLE_VARIANTS:
+        cells = [pick(v, t) for t in TASKS]
+        if not any(cells):
+            continue
+        got = [c["success"] for c in cells if c]
+        avg = f"{100 * np.mean(got):.1f}" + ("" if len(got) == len(TASKS) else f" ({len(got)} tasks)")
+        paper = PAPER[v][1] if hand == "shadow" and v in PAPER else "-"
+        lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_pct(c and c["success"]) for c in cells)
+                     + f" | {avg} | {_sizes(cells)} | {paper} |")
+        if hand == "shadow" and v in PAPER:
+            lines.append(f"| paper {v} | " + " | ".join(str(x) for x in PAPER[v][0]) + f" | {PAPER[v][1]} | | |")
+    lines.append("")
+    if any(pick(v, t) and "held_multiple" in pick(v, t) for v in VARIANTS for t in TASKS):
+        lines += [f"### Held task wrench: {hand}, {what}", "",
+                  "Per pose, the largest multiple of the task's disturbance held (grid 0.25, 0.5, 1, 2, 4, 8, 16, 32; "
+                  "0: none, or rejected before simulating); cells: median [p25, p75] over the poses (N in the table "
+                  "above). Median held magnitude = median x the disturbance in the task table.", "",
+                  "| variant | " + " | ".join(COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
+        for v in TABLE_VARIANTS:
+            cells = [pick(v, t) for t in TASKS]
+            if any(c and "held_multiple" in c for c in cells):
+                lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_held_cell(c) for c in cells) + " |")
         lines.append("")
+    lines += _energy_vs_test(pick, hand, what)
+    if any(pick(v, t) and "success_stress" in pick(v, t) for v in VARIANTS for t in TASKS):
         lines += [f"### Robustness margin: {hand}, success % at 1x / 3x / 10x the disturbance (same poses)", "",
                   "| variant | " + " | ".join(COLUMNS) + " | average |", "|---|" + "---|" * (len(COLUMNS) + 1)]
         for v in ("baseline", "l2", "nocpn", "full"):
-            cells = [_pick(recs, hand, v, t) for t in TASKS]
+            cells = [pick(v, t) for t in TASKS]
             if not any(c and "success_stress" in c for c in cells):
                 continue
             fmt = lambda c: "-" if not c or "success_stress" not in c else "/".join(  # noqa: E731
@@ -296,51 +399,72 @@ def _render_version(recs: list[dict]) -> list[str]:
                            for k in (1,) + STRESS)
             lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(fmt(c) for c in cells) + f" | {avg} |")
         lines.append("")
-        hyper = [v for v in ("full", "d15_k1e4", "d0_k1e2", "d0_k1e4") if any(_pick(recs, hand, v, t) for t in TASKS)]
-        if hyper:
-            common = [t for t in TASKS if all(_pick(recs, hand, v, t) for v in hyper)]
-            lines += [f"## Hyper-parameters: {hand}", "",
-                      f"Averages over the {len(common)} tasks every row has ({', '.join(common)}); time = synthesis "
-                      "wall time per task at that row's size, memory = peak RSS above the (warm) process's RSS "
-                      "before that synthesis.", "",
-                      "| variant | delta | K | poses x iters | success % (tasks) | synthesis s per task (median) "
-                      "| peak memory MB (max) | paper SS / t / M |", "|---|---|---|---|---|---|---|---|"]
-            for v in hyper:
-                cells = [_pick(recs, hand, v, t) for t in common]
-                cfg = dict(VARIANTS[v][1])
-                sizes = sorted({f"{c['num']}x{c['iters']}" for c in cells})
-                paper = PAPER_HYPER[v]
-                lines.append(f"| {VARIANTS[v][0]} | {cfg.get('delta_deg', 15.0):g} | {cfg.get('num_directions', 100):.0e} | "
-                             f"{', '.join(sizes)} | {100 * np.mean([c['success'] for c in cells]):.1f} ({len(cells)}) | "
-                             f"{np.median([c['synth_s'] for c in cells]):.1f} | {max(c['peak_mb'] for c in cells):.0f} | "
-                             f"{paper[0]} / {paper[1]} s / {paper[2]} GB |")
-            lines.append("")
-        lines += [f"## Runs and failure reasons: {hand}", "",
-                  "| task | variant | poses x iters | success % | synthesis s | eval s | peak MB | tips in contact % | "
-                  "median max penetration mm | code | reasons |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for t in TASKS:
-            for v in VARIANTS:
-                c = _pick(recs, hand, v, t)
-                if c:
-                    why = ", ".join(f"{k} {n}" for k, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]))
-                    note = " (no self-pen.)" if c.get("no_self_penetration") else ""
-                    lines.append(f"| {t} | {v}{note} | {c['num']}x{c['iters']} | {_pct(c['success'])} | {c['synth_s']:.1f} | "
-                                 f"{c['eval_s']:.1f} | {c['peak_mb']:.0f} | {_pct(c['tips_in_contact'])} | "
-                                 f"{c['max_penetration_mm_median']:.1f} | {c.get('code_version', '-')} | {why} |")
+    hyper = [v for v in ("full", "d15_k1e4", "d0_k1e2", "d0_k1e4") if any(pick(v, t) for t in TASKS)]
+    if len(hyper) > 1:
+        common = [t for t in TASKS if all(pick(v, t) for v in hyper)]
+        lines += [f"## Hyper-parameters: {hand}, {what}", "",
+                  f"Averages over the {len(common)} tasks every row has ({', '.join(common)}); time = synthesis "
+                  "wall time per task at that row's size, memory = peak RSS above the (warm) process's RSS "
+                  "before that synthesis.", "",
+                  "| variant | delta | K | poses x iters | success % (tasks) | synthesis s per task (median) "
+                  "| peak memory MB (max) | paper SS / t / M |", "|---|---|---|---|---|---|---|---|"]
+        for v in hyper:
+            cells = [pick(v, t) for t in common]
+            cfg = dict(VARIANTS[v][1])
+            sizes = sorted({f"{c['num']}x{c['iters']}" for c in cells})
+            paper = PAPER_HYPER[v]
+            lines.append(f"| {VARIANTS[v][0]} | {cfg.get('delta_deg', 15.0):g} | {cfg.get('num_directions', 100):.0e} | "
+                         f"{', '.join(sizes)} | {100 * np.mean([c['success'] for c in cells]):.1f} ({len(cells)}) | "
+                         f"{np.median([c['synth_s'] for c in cells]):.1f} | {max(c['peak_mb'] for c in cells):.0f} | "
+                         f"{paper[0]} / {paper[1]} s / {paper[2]} GB |")
         lines.append("")
+    lines += [f"## Runs and failure reasons: {hand}, {what}", "",
+              "| task | variant | poses x iters | success % | synthesis s | eval s | peak MB | tips in contact % | "
+              "median max penetration mm | median E_t | code | reasons |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for t in TASKS:
+        for v in VARIANTS:
+            c = pick(v, t)
+            if c:
+                why = ", ".join(f"{k} {n}" for k, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]))
+                note = " (no self-pen.)" if c.get("no_self_penetration") else ""
+                et = f"{np.median(c['e_task']):.2f}" if c.get("e_task") else "-"
+                lines.append(f"| {t} | {v}{note} | {c['num']}x{c['iters']} | {_pct(c['success'])} | {c['synth_s']:.1f} | "
+                             f"{c['eval_s']:.1f} | {c['peak_mb']:.0f} | {_pct(c['tips_in_contact'])} | "
+                             f"{c['max_penetration_mm_median']:.1f} | {et} | {c.get('code_version', '-')} | {why} |")
+    lines.append("")
     return lines
+
+
+def headline(records: Path, hand: str = "shadow") -> str:
+    """``tasks-generic: full=F baseline=B ...``: ten-task averages, generic initialisation, latest
+    code version that has both variants on every task (with the poses per task)."""
+    allrecs = _load(records)
+    for version in sorted({r.get("code_version", "-") for r in allrecs},
+                          key=lambda v: max(r["finished_at"] for r in allrecs if r.get("code_version", "-") == v),
+                          reverse=True):
+        recs = [r for r in allrecs if r.get("code_version", "-") == version]
+        cells = {v: [_pick(recs, hand, v, t, "generic") for t in TASKS] for v in ("full", "baseline")}
+        if all(all(c) for c in cells.values()):
+            f, b = (100 * np.mean([c["success"] for c in cells[v]]) for v in ("full", "baseline"))
+            n = "/".join(sorted({str(c["num"]) for v in cells for c in cells[v]}))
+            return f"tasks-generic: full={f:.1f} baseline={b:.1f} (ten tasks, {hand}, N={n} poses per task, code {version})"
+    return f"tasks-generic: full=- baseline=- (no complete generic-initialisation run of {hand} yet)"
 
 
 NOTES_HEADING = "## Notes (hand-written"
 
 
-def write_report(out: Path, text: str) -> None:
+def write_report(out: Path, text: str, last_line: str) -> None:
     """Write the generated report to ``out``, keeping the hand-written notes section (from
-    ``NOTES_HEADING`` to the end) of the file already there."""
+    ``NOTES_HEADING`` up to a final ``tasks-generic:`` line) of the file already there, and end
+    it with ``last_line``."""
     old = out.read_text() if out.exists() else ""
     at = old.find(NOTES_HEADING)
+    notes = old[at:].rstrip("\n") if at >= 0 else ""
+    if notes.splitlines() and notes.splitlines()[-1].startswith("tasks-generic:"):
+        notes = "\n".join(notes.splitlines()[:-1]).rstrip("\n")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text.rstrip("\n") + "\n" + ("\n" + old[at:] if at >= 0 else ""))
+    out.write_text(text.rstrip("\n") + "\n" + ("\n" + notes + "\n" if notes else "") + "\n" + last_line + "\n")
 
 
 def main():
@@ -352,6 +476,7 @@ def main():
     ap.add_argument("--num-k1e4", type=int, default=None, help="poses for the K = 1e4 variants (default --num)")
     ap.add_argument("--iters", type=int, default=500)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--inits", default=",".join(INITS), help="initialisation regimes: task, generic")
     ap.add_argument("--no-self-penetration", default="leap", help="hands run with self-penetration weight 0")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--out", type=Path, default=RESULTS)
@@ -376,20 +501,24 @@ def main():
             except Exception as exc:  # noqa: BLE001 - an optional hand that is not installed
                 print(f"skipping hand {hname}: {exc}", flush=True)
                 continue
-            for v in variants:
-                num = args.num_k1e4 if (args.num_k1e4 and "k1e4" in v) else args.num
-                for t in tasks:
-                    path = record_path(args.records, hname, v, t, num, args.iters)
-                    if path.exists() and not args.force:
-                        continue
-                    rec = run_record(hand, t, v, num, args.iters, objects, args.seed,
-                                     hname in args.no_self_penetration.split(","))
-                    path.write_text(json.dumps(rec, indent=1))
-                    print(f"{hname} {v} {t}: {100 * rec['success']:.0f}% synth {rec['synth_s']:.1f}s eval "
-                          f"{rec['eval_s']:.1f}s peak {rec['peak_mb']:.0f}MB {rec['reasons']}", flush=True)
-                    write_report(args.out, render(args.records, machine))
-    write_report(args.out, render(args.records, machine))
+            for init in args.inits.split(","):
+                for v in variants:
+                    num = args.num_k1e4 if (args.num_k1e4 and "k1e4" in v) else args.num
+                    for t in tasks:
+                        path = record_path(args.records, hname, v, t, num, args.iters, init)
+                        if path.exists() and not args.force:
+                            continue
+                        rec = run_record(hand, t, v, num, args.iters, objects, args.seed,
+                                         hname in args.no_self_penetration.split(","), init)
+                        path.write_text(json.dumps(rec, indent=1))
+                        print(f"{hname} {init} {v} {t}: {100 * rec['success']:.0f}% held median "
+                              f"{np.median(rec['held_multiple']):g} synth {rec['synth_s']:.1f}s eval "
+                              f"{rec['eval_s']:.1f}s peak {rec['peak_mb']:.0f}MB {rec['reasons']}", flush=True)
+                        write_report(args.out, render(args.records, machine), headline(args.records))
+    line = headline(args.records)
+    write_report(args.out, render(args.records, machine), line)
     print(f"wrote {args.out}")
+    print(line)
 
 
 if __name__ == "__main__":

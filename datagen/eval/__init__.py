@@ -6,7 +6,8 @@
 
 ``poses`` (3, 7 + J): pregrasp, grasp, squeeze rows [x y z qw qx qy qz, joints] in the object
 frame (metres, radians). `GraspResult` carries ``success``, a ``reason`` code (`Reason`) and the
-metrics. ``datagen eval`` (table.py, commands.py) adds them as columns to a grasp table;
+metrics; ``Evaluator.margin`` also the largest multiple of the test's disturbance the grasp holds
+(`TaskMargin`). ``datagen eval`` (table.py, commands.py) adds them as columns to a grasp table;
 ``datagen render`` draws grasps (render.py).
 
 The names below are loaded on first use: importing ``datagen.eval`` (or its CLI module) does not
@@ -19,10 +20,11 @@ import importlib
 
 __all__ = [
     "DEFAULT_TASKS", "DIRECTION_NAMES", "EvalConfig", "EvalError", "Evaluator", "GraspResult",
-    "ObjectPieces", "Reason", "Scene", "TaskTest", "build_scene", "pieces_from_processed",
+    "MULTIPLES", "ObjectPieces", "Reason", "Scene", "TaskMargin", "TaskTest", "build_scene", "pieces_from_processed",
 ]
 _MODULE = {"DEFAULT_TASKS": "config", "DIRECTION_NAMES": "config", "EvalConfig": "config", "EvalError": "config",
            "TaskTest": "config", "Evaluator": "evaluate", "GraspResult": "evaluate", "Reason": "evaluate",
+           "MULTIPLES": "evaluate", "TaskMargin": "evaluate",
            "ObjectPieces": "scene", "Scene": "scene", "build_scene": "scene", "pieces_from_processed": "scene"}
 
 

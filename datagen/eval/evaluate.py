@@ -17,6 +17,10 @@ Order of decisions (the first that applies is the reason):
 Metrics are computed for every grasp (also rejected ones) at the grasp pose: penetration,
 self penetration, per-finger contact distance, and the epsilon metric
 (`datagen.wrench.epsilon_metric`, contacts within ``contact_distance_m``, mu = friction).
+
+`Evaluator.margin` also measures how large a disturbance the grasp holds: the same test (same
+thresholds, same closed hand) repeated at multiples of its disturbance on a fixed grid
+(`MULTIPLES`), see `TaskMargin`.
 """
 
 from __future__ import annotations
@@ -42,7 +46,10 @@ from .scene import ObjectPieces, Scene, build_scene
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Reason", "GraspResult", "Evaluator"]
+__all__ = ["MULTIPLES", "Reason", "GraspResult", "Evaluator", "TaskMargin"]
+
+#: the fixed grid of disturbance multiples `Evaluator.margin` tests (1: the test's own magnitude)
+MULTIPLES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
 class Reason(str, enum.Enum):
@@ -88,6 +95,25 @@ class GraspResult:
     num_contacts: int
     epsilon: float
     sim_steps: int
+
+
+@dataclass(frozen=True)
+class TaskMargin:
+    """The largest multiple of a test's disturbance that a grasp holds (`Evaluator.margin`).
+
+    ``result``: the verdict at the test's own magnitude (identical to `Evaluator.evaluate`).
+    ``held_multiple``: on the grid, scanning up from 1 while the grasp holds, the last multiple
+    held; if it fails at 1, scanning down, the first multiple held; 0 when it holds none (or was
+    rejected before simulating: penetration, no contact, filters, invalid). Assumes that holding
+    a disturbance implies holding a smaller one of the same direction (checked only where the
+    scan passes). ``held_wrench``: ``held_multiple`` times the test's disturbance magnitude
+    (N for a force, N m for a pure torque; the six-direction test's force, N). ``tested``:
+    ``(multiple, held)`` pairs in the order simulated."""
+
+    result: GraspResult
+    held_multiple: float
+    held_wrench: float
+    tested: tuple
 
 
 class Evaluator:
@@ -167,6 +193,21 @@ class Evaluator:
             w_t: (6,) the row's task wrench; for a task test it replaces the configured ``w_t``
                 (the joint, axis and scaling stay the config's). Ignored for hold tasks.
         """
+        return self._run(pieces, poses, task, w_t, None).result
+
+    def margin(self, pieces: ObjectPieces, poses: np.ndarray, task: str = "force_closure", w_t=None,
+               multiples=MULTIPLES) -> TaskMargin:
+        """`evaluate` plus the largest multiple of the test's disturbance held (see `TaskMargin`).
+
+        ``multiples``: increasing grid of positive multiples containing 1. Each multiple is the
+        same hold test (thresholds, directions) from the same closed hand, with the disturbance
+        (the task's wrench, or the six-direction force) scaled by it."""
+        grid = tuple(float(m) for m in multiples)
+        if 1.0 not in grid or any(m <= 0 for m in grid) or list(grid) != sorted(set(grid)):
+            raise EvalError("Evaluator.margin multiples", f"must be increasing, > 0 and contain 1, got {multiples!r}")
+        return self._run(pieces, poses, task, w_t, grid)
+
+    def _run(self, pieces: ObjectPieces, poses: np.ndarray, task: str, w_t, grid) -> TaskMargin:
         cfg = self.cfg
         test = cfg.task_test(task)  # raises EvalError for an unknown task
         if test is not None and w_t is not None:
@@ -200,8 +241,17 @@ class Evaluator:
                 num_contacts=len(met.contact_points) if met else 0,
                 epsilon=eps, sim_steps=steps)
 
+        def done(res: GraspResult, held: float = 0.0, tested: tuple = ()) -> TaskMargin:
+            return TaskMargin(res, held, held * magnitude, tested)
+
+        if test is None:
+            magnitude = cfg.force_per_kg * scene.object_mass
+        else:
+            w = test.disturbance(scene.object_mass, pieces.scale, cfg.force_per_kg)
+            magnitude = float(np.linalg.norm(w[:3]) if np.any(w[:3]) else np.linalg.norm(w[3:]))
+
         if not np.all(np.isfinite(poses)) or np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-9):
-            return result(Reason.INVALID_GRASP.value)
+            return done(result(Reason.INVALID_GRASP.value))
         static = datas[-1]
         pre = static_metrics(scene, static, poses[0], touch_distance=cfg.touch_distance_m,
                              contact_distance=cfg.contact_distance_m, with_self=False).penetration
@@ -210,16 +260,16 @@ class Evaluator:
         eps = self.epsilon(met)
         common = dict(pre=pre, met=met, eps=eps)
         if pre > cfg.max_pregrasp_penetration_m:
-            return result(Reason.PENETRATION.value, **common)
+            return done(result(Reason.PENETRATION.value, **common))
         min_links = cfg.min_touching_links if test is None or test.min_touching_links is None else test.min_touching_links
         if met.touching_links < min_links:
-            return result(Reason.NO_CONTACT.value, **common)
+            return done(result(Reason.NO_CONTACT.value, **common))
         if cfg.filter_max_penetration_m is not None and met.penetration > cfg.filter_max_penetration_m:
-            return result(Reason.GRASP_PENETRATION.value, **common)
+            return done(result(Reason.GRASP_PENETRATION.value, **common))
         if cfg.filter_max_self_penetration_m is not None and met.self_penetration > cfg.filter_max_self_penetration_m:
-            return result(Reason.SELF_PENETRATION.value, **common)
+            return done(result(Reason.SELF_PENETRATION.value, **common))
         if cfg.filter_min_epsilon is not None and eps < cfg.filter_min_epsilon:
-            return result(Reason.LOW_EPSILON.value, **common)
+            return done(result(Reason.LOW_EPSILON.value, **common))
 
         closed = datas[-2]
         initial_state(scene, closed, poses[0])
@@ -234,7 +284,7 @@ class Evaluator:
         n0 = int(round(closed.time / cfg.timestep_s))
         if closed.warning[mujoco.mjtWarning.mjWARN_BADQACC].number or not np.all(np.isfinite(closed.qpos)):
             dirs = [DirectionResult(False, math.inf, math.inf, True)] * n_dir
-            return result(Reason.UNSTABLE.value, False, dirs, steps=n0, **common)
+            return done(result(Reason.UNSTABLE.value, False, dirs, steps=n0, **common))
         mass = scene.object_mass
         if test is None:
             f = cfg.force_per_kg * mass
@@ -245,11 +295,37 @@ class Evaluator:
         steps = n0 + sum(int(round(d.time / cfg.timestep_s)) - n0 for d in datas[:len(wrenches)])
         failed = [i for i, d in enumerate(dirs) if d.success is False]
         if not failed:
-            return result(Reason.OK.value, True, dirs, steps=steps, **common)
-        if any(dirs[i].unstable for i in failed):
-            reason = Reason.UNSTABLE.value
-        elif test is None:
-            reason = Reason.slipped(DIRECTION_NAMES[failed[0]])
+            res = result(Reason.OK.value, True, dirs, steps=steps, **common)
         else:
-            reason = Reason.SLIPPED_TASK.value
-        return result(reason, False, dirs, steps=steps, **common)
+            if any(dirs[i].unstable for i in failed):
+                reason = Reason.UNSTABLE.value
+            elif test is None:
+                reason = Reason.slipped(DIRECTION_NAMES[failed[0]])
+            else:
+                reason = Reason.SLIPPED_TASK.value
+            res = result(reason, False, dirs, steps=steps, **common)
+        if grid is None:
+            return done(res)
+        hold_cfg = self._hold_config(test)
+
+        def holds(k: float) -> bool:
+            out = hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, self._pool)
+            return all(d.success for d in out)
+
+        tested, held = [(1.0, res.success)], 0.0
+        if res.success:
+            held = 1.0
+            for k in (m for m in grid if m > 1):
+                ok = holds(k)
+                tested.append((k, ok))
+                if not ok:
+                    break
+                held = k
+        else:
+            for k in (m for m in reversed(grid) if m < 1):
+                ok = holds(k)
+                tested.append((k, ok))
+                if ok:
+                    held = k
+                    break
+        return done(res, held, tuple(tested))

@@ -107,6 +107,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
     t0 = time.perf_counter()
     cfg = cfg.for_hand(hand)
+    task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
     gen = generator or torch.Generator().manual_seed(cfg.seed)
     dev, dt = hand.device, hand.dtype
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)

@@ -3,6 +3,8 @@
     spec = load_task("turn_knob2")          # datagen/tasks/specs/turn_knob2.yaml, or a YAML path
     spec.w_t, spec.gamma_deg, spec.fingers  # the task wrench space and contact fingertips (synthesis)
     spec.init                               # InitConfig: the initial hand poses (datagen.synth.init)
+    spec.for_hand("allegro")                # the task with its `hands:` entry for that hand applied
+    SynthConfig.from_dict(spec.synth_settings({...}))  # its `synth:` block, the caller's settings on top
     task_test_from_spec(spec)               # TaskTest: the physical test (datagen.eval), None: six directions
     task_targets(spec, targets)             # the objects it runs on
 
@@ -13,9 +15,9 @@ Modules: ``spec`` (TaskSpec, InitConfig, loading), ``evaluation`` (the ``eval`` 
 
 from .evaluation import EVAL_KEYS, TaskTest, builtin_task_test, has_builtin_test, task_object, task_test_from_spec
 from .pairing import task_object_id, task_targets
-from .spec import SPEC_DIR, InitConfig, TaskSpec, builtin_tasks, load_task
+from .spec import SPEC_DIR, HandOverride, InitConfig, TaskSpec, builtin_tasks, load_task
 
 __all__ = [
-    "EVAL_KEYS", "SPEC_DIR", "InitConfig", "TaskSpec", "TaskTest", "builtin_task_test", "builtin_tasks",
+    "EVAL_KEYS", "SPEC_DIR", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_task_test", "builtin_tasks",
     "has_builtin_test", "load_task", "task_object", "task_object_id", "task_targets", "task_test_from_spec",
 ]

@@ -5,18 +5,29 @@ A task YAML (``datagen/tasks/specs/<name>.yaml`` for the built-in ones) is one m
 ``eval`` the task's physical test (parsed by `datagen.tasks.evaluation`, read by
 `datagen.eval`). Synthesis and evaluation both read tasks from here, so neither reaches into the
 other.
+
+A ``hands`` block adapts a task to hands other than the one its pose was written for: per hand
+name, ``init`` (InitConfig fields replacing the task's: a hand's own aim point, curl, thumb
+hint) and ``fingers`` (e.g. without the little finger). `TaskSpec.for_hand` applies it::
+
+    hands:
+      allegro: {init: {target_m: [0.0, 0.06, 0.02], curl: 0.4}}
+
+A ``synth`` block holds the `SynthConfig` settings the task's synthesis starts from (its
+callers put their own on top: `TaskSpec.synth_settings`), e.g. exact contacts and multi-start.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any, Mapping
 
 from datagen.config import Config
 from datagen.errors import ConfigError
 
-__all__ = ["SPEC_DIR", "InitConfig", "TaskSpec", "builtin_tasks", "load_task"]
+__all__ = ["SPEC_DIR", "HandOverride", "InitConfig", "TaskSpec", "builtin_tasks", "load_task"]
 
 SPEC_DIR = Path(__file__).parent / "specs"
 
@@ -62,6 +73,21 @@ class InitConfig(Config):
 
 
 @dataclass(frozen=True)
+class HandOverride(Config):
+    """A task's adaptation to one hand: ``init`` fields replacing the task's (checked as an
+    `InitConfig` when applied) and the contact ``fingers`` (None: the task's)."""
+
+    init: Mapping[str, Any] = field(default_factory=dict)
+    fingers: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        unknown = sorted(set(self.init) - {f for f in InitConfig.__dataclass_fields__})
+        if unknown:
+            raise ConfigError(f"hands.init: unknown InitConfig field(s) {unknown}",
+                              f"known: {sorted(InitConfig.__dataclass_fields__)}")
+
+
+@dataclass(frozen=True)
 class TaskSpec(Config):
     """A task as data: the TWS (w_t, gamma), which fingertips make contact, the initial pose, the test."""
 
@@ -71,6 +97,10 @@ class TaskSpec(Config):
     fingers: tuple[str, ...] | str = "all"  #: the contact fingertips (hand finger names) or "all"
     init: InitConfig = field(default_factory=InitConfig)
     eval: str | dict = "six_direction"  #: "six_direction" or the task test mapping (see datagen.tasks.evaluation)
+    hands: Mapping[str, HandOverride] = field(default_factory=dict)  #: per-hand init / fingers (see for_hand)
+    #: SynthConfig fields this task's synthesis starts from (e.g. ``exact_contacts``,
+    #: ``seeds_per_grasp``, ``weights: {task: ...}``); a caller's own settings go on top (`synth_settings`)
+    synth: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         object.__setattr__(self, "w_t", tuple(float(x) for x in self.w_t))  # equal specs, equal hashes
@@ -80,6 +110,32 @@ class TaskSpec(Config):
             raise ConfigError(f"task {self.name!r}: w_t must be 6 numbers, not all zero, got {self.w_t}")
         if not 0 < self.gamma_deg <= 180:
             raise ConfigError(f"task {self.name!r}: gamma_deg must lie in (0, 180], got {self.gamma_deg}")
+        hands = {str(k): v if isinstance(v, HandOverride) else HandOverride.from_dict(v, f"task {self.name!r}: hands.{k}")
+                 for k, v in dict(self.hands).items()}
+        object.__setattr__(self, "hands", hands)
+        for k in hands:
+            self.for_hand(k)  # every hand's init must be a valid InitConfig
+
+    def synth_settings(self, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """A `SynthConfig` mapping: this task's ``synth`` block with ``overrides`` on top (the
+        ``weights`` mapping merged key by key). Build it with ``SynthConfig.from_dict``, which
+        names an unknown or bad field."""
+        out = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in dict(self.synth).items()}
+        for k, v in dict(overrides or {}).items():
+            if k == "weights" and isinstance(v, Mapping) and isinstance(out.get(k), dict):
+                out[k] = {**out[k], **dict(v)}
+            else:
+                out[k] = dict(v) if isinstance(v, Mapping) else v
+        return out
+
+    def for_hand(self, hand_name: str) -> "TaskSpec":
+        """This task as hand ``hand_name`` runs it: its ``hands`` entry's init fields and fingers
+        applied (the task itself when it has none); the result has no ``hands`` block."""
+        o = self.hands.get(hand_name)
+        if o is None:
+            return self if not self.hands else replace(self, hands={})
+        init = InitConfig.from_dict({**self.init.to_dict(), **dict(o.init)}, f"task {self.name!r}: hands.{hand_name}.init")
+        return replace(self, init=init, fingers=o.fingers if o.fingers is not None else self.fingers, hands={})
 
 
 def builtin_tasks() -> list[str]:

@@ -43,3 +43,46 @@ def test_tasks_pair_with_their_objects():
     assert [t.object_id for t in task_targets(load_task("pull_drawer"), targets)] == ["task-drawer"]
     assert task_targets(load_task("force_closure"), targets) == targets
     assert task_targets(load_task("precision_key"), targets) == []  # its object is not among them
+
+
+def test_hands_block_overrides_init_and_fingers_for_that_hand_only(tmp_path):
+    p = tmp_path / "h.yaml"
+    p.write_text("name: h\nfingers: [th, ff, mf]\ninit: {kind: approach, curl: 0.3, target_m: [0, 0, 0.01]}\n"
+                 "hands:\n  allegro: {init: {curl: 0.5, target_m: [0.0, 0.02, 0.0]}, fingers: [th, ff]}\n"
+                 "  leap: {init: {aim: fingertips}}\n")
+    spec = load_task(p)
+    a = spec.for_hand("allegro")
+    assert (a.init.curl, a.init.target_m, a.fingers) == (0.5, (0.0, 0.02, 0.0), ("th", "ff"))
+    assert a.init.kind == "approach" and a.hands == {}  # the rest is the task's
+    leap = spec.for_hand("leap")
+    assert (leap.init.aim, leap.init.curl, leap.fingers) == ("fingertips", 0.3, ("th", "ff", "mf"))
+    shadow = spec.for_hand("shadow")
+    assert (shadow.init, shadow.fingers) == (spec.init, spec.fingers)
+    p.write_text(yaml.safe_dump(spec.to_dict()))
+    assert load_task(p) == spec  # round-trips with its hands block
+
+
+@pytest.mark.parametrize("block, field", [("allegro: {init: {curll: 0.5}}", "curll"),
+                                          ("allegro: {init: {curl: 2.0}}", "curl"),
+                                          ("allegro: {finger: [th]}", "finger")])
+def test_bad_hands_block_names_the_field(tmp_path, block, field):
+    p = tmp_path / "h.yaml"
+    p.write_text(f"name: h\nhands:\n  {block}\n")
+    with pytest.raises(ConfigError, match=field):
+        load_task(p)
+
+
+def test_synth_block_is_the_start_and_callers_settings_go_on_top(tmp_path):
+    from datagen.synth import SynthConfig
+
+    p = tmp_path / "s.yaml"
+    p.write_text("name: s\nsynth: {exact_contacts: true, seeds_per_grasp: 8, weights: {task: 3.0}}\n")
+    spec = load_task(p)
+    cfg = SynthConfig.from_dict(spec.synth_settings({"weights": {"distance": 2.0e4}, "iters": 7}))
+    assert (cfg.exact_contacts, cfg.seeds_per_grasp, cfg.iters) == (True, 8, 7)
+    assert (cfg.weights.task, cfg.weights.distance) == (3.0, 2.0e4)  # weights merged key by key
+    assert SynthConfig.from_dict(spec.synth_settings({"weights": {"task": 0.0}})).weights.task == 0.0
+    assert spec.for_hand("allegro").synth == spec.synth
+    p.write_text("name: s\nsynth: {seeds: 8}\n")
+    with pytest.raises(ConfigError, match="seeds"):
+        SynthConfig.from_dict(load_task(p).synth_settings())
