@@ -124,10 +124,13 @@ def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, 
                     splits: Mapping[str, str] | None = None, callback=None):
     """``(SynthesisResult, table)``: ``grasps_per_object`` grasps on every target in one batch
     (`datagen.synth.synthesize`, seeded by ``cfg.seed``) and their rows (``grasps`` schema,
-    `datagen.synth.rows.result_table`). ``callback(it, ...)`` is the optimizer's per-iteration hook."""
+    `datagen.synth.rows.result_table`). The task's own ``synth:`` block lies under ``cfg``
+    (`SynthConfig.for_task`: fields ``cfg`` sets away from the defaults win). ``callback(it, ...)``
+    is the optimizer's per-iteration hook."""
     from datagen.synth import synthesize
     from datagen.synth.rows import result_table
 
+    cfg = cfg.for_task(task)
     result = synthesize(hand, list(targets), task, cfg, grasps_per_object, callback=callback)
     return result, result_table(result, list(targets), hand, task, cfg, splits=splits)
 

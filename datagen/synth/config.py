@@ -70,6 +70,19 @@ class SynthConfig(Config):
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     seed: int = 0
 
+    def for_task(self, task) -> "SynthConfig":
+        """This config over the task's own ``synth:`` block (`datagen.tasks.TaskSpec.synth_settings`):
+        the task's settings replace the defaults, and every field this config sets to a value other
+        than SynthConfig's default wins over the task (a job's ``synth:`` mapping, a CLI flag)."""
+        if not task.synth:
+            return self
+        mine, default = self.to_dict(), SynthConfig().to_dict()
+        explicit = {k: v for k, v in mine.items() if k != "weights" and v != default[k]}
+        weights = {k: v for k, v in mine["weights"].items() if v != default["weights"][k]}
+        if weights:
+            explicit["weights"] = weights
+        return SynthConfig.from_dict(task.synth_settings(explicit), where=f"task {task.name!r} synth")
+
     def for_hand(self, hand) -> "SynthConfig":
         """This config with the hand's own values where it leaves them open (``sphere_margin_m``:
         how far the hand's collision spheres overshoot its collision geometry, from its spec)."""

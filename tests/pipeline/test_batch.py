@@ -113,3 +113,22 @@ def test_synth_then_eval_commands_give_the_batch_rows(world, tmp_path):
                     grasps_per_object=2, seed=3, cache=cache)
     assert out.failures == []
     assert len(cli_rows) == 2 and _clean(out.rows.to_pylist()) == _clean(cli_rows)
+
+
+def test_a_tasks_synth_block_lies_under_the_run_config():
+    """SynthConfig.for_task: the task's `synth:` block replaces the defaults; a field the run sets
+    away from its default wins (a job's synth mapping), weights merged key by key; a task without
+    a block leaves the config as it is."""
+    from datagen.synth.config import EnergyWeights
+    from datagen.tasks import load_task
+
+    plate = load_task("lift_plate")
+    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 8}
+    merged = SynthConfig().for_task(plate)
+    assert merged.exact_contacts is True and merged.seeds_per_grasp == 8 and merged.iters == SynthConfig().iters
+    mine = SynthConfig(seeds_per_grasp=2, iters=40, weights=EnergyWeights(task=0.0)).for_task(plate)
+    assert (mine.seeds_per_grasp, mine.iters, mine.exact_contacts) == (2, 40, True)
+    assert mine.weights.task == 0.0 and mine.weights.distance == EnergyWeights().distance
+    fc = load_task("force_closure")
+    cfg = SynthConfig(iters=7)
+    assert not fc.synth and cfg.for_task(fc) is cfg
