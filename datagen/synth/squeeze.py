@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "hand_squeeze", "joint_squeeze",
+__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "hand_squeeze", "joint_squeeze", "actuator_compliance",
            "normal_squeeze", "point_jacobian", "pregrasp_and_squeeze", "tip_jacobian"]
 
 
@@ -137,6 +137,31 @@ def point_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, links: t
     return g.reshape(R, B, J).transpose(0, 1)
 
 
+def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
+    """``(J, J)`` P such that the squeeze displacement ``dq = P tau / kp`` makes the hand's position
+    actuators (stiffness ``kp`` each, transmissions ``ctrl = A q``, A = ``hand.ctrl_matrix``)
+    exert on the blocked hand the generalized forces closest to ``tau`` (least squares), in the
+    coordinates of the hand's independent joints (followers of a coupling move with their
+    leaders). ``P = pinv(C^T A^T A C)`` over the ``movable`` joints, C the couplings' Jacobian.
+
+    One actuator per joint (gear 1): P = I, ``dq = tau / kp``. A tendon actuator driving two
+    joints (Shadow E3M5's J1 + J2 of each finger) pulls both with the same force
+    ``kp (dq_1 + dq_2)``: setting each joint's ``dq_i = tau_i / kp`` as if it had its own actuator
+    doubles the force; P splits ``(tau_1 + tau_2) / 2`` evenly instead."""
+    J = hand.num_joints
+    dt, dev = hand.joint_lower.dtype, hand.joint_lower.device
+    C = torch.eye(J, dtype=torch.float64, device=dev)
+    for follower, leader, ratio, _offset in hand._couple:
+        C[follower, follower] = 0.0
+        C[follower, leader] = ratio
+    A = torch.as_tensor(hand.ctrl_matrix, dtype=torch.float64, device=dev)
+    AC = A @ C
+    M = AC.T @ AC
+    m = movable.to(dev)
+    M = M * (m[:, None] & m[None, :])
+    return torch.linalg.pinv(M, hermitian=True).to(dt)
+
+
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                   points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
                   approach_m: float, movable: torch.Tensor,
@@ -158,7 +183,8 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     f = balanced_forces(points, inward_normals, mu)
     balance = (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)  # (B,)
     f = f * (force_n * balance / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
-    dq_force = (J.transpose(1, 2) @ f.reshape(B, 3 * F, 1)).squeeze(-1) / kp
+    tau = (J.transpose(1, 2) @ f.reshape(B, 3 * F, 1)).squeeze(-1)
+    dq_force = tau @ actuator_compliance(hand, movable).T / kp
     e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
     eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
     dq_gap = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
@@ -196,7 +222,8 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     f = f * (force_n * balance / f[:, :F].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
     all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
     Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
-    dq_force = (Jc.transpose(1, 2) @ f.reshape(B, -1, 1)).squeeze(-1) / kp
+    tau = (Jc.transpose(1, 2) @ f.reshape(B, -1, 1)).squeeze(-1)
+    dq_force = tau @ actuator_compliance(hand, movable).T / kp
     Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
     e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
     eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)

@@ -272,3 +272,31 @@ def test_hand_squeeze_is_the_statics_of_all_touching_links(hand):
             checked += 1
     assert checked > 10
     assert torch.allclose(pre, hand64.apply_couplings(2 * joints - sq))
+
+
+def test_actuator_compliance_gives_least_squares_actuator_forces():
+    """Shadow E3M5 drives each finger's J1 + J2 by one tendon actuator. For any wanted joint
+    torques tau, the squeeze displacement dq = P tau / kp must make actuator forces
+    F = kp A dq (A: the hand's ctrl matrix, from its MJCF) whose joint torques A^T F are the least-
+    squares match of tau: the normal equations A (A^T F - tau) = 0 over the movable joints. One
+    actuator per joint (Allegro): dq = tau / kp exactly."""
+    from datagen.synth.squeeze import actuator_compliance
+    from datagen.synth.synthesize import finger_joint_mask
+
+    kp = 5.0
+    for name in ("shadow_e3m5", "allegro"):
+        h = load_hand(name, dtype=torch.float64)
+        movable = finger_joint_mask(h)
+        A = torch.as_tensor(h.ctrl_matrix, dtype=torch.float64)[:, movable]
+        A = A[A.abs().sum(1) > 0]  # actuators of movable joints
+        tau = torch.randn(h.num_joints, dtype=torch.float64, generator=torch.Generator().manual_seed(4))
+        tau = tau * movable
+        dq = actuator_compliance(h, movable) @ tau / kp
+        F = kp * (A @ dq[movable])
+        assert (A @ (A.T @ F - tau[movable])).abs().max() < 1e-9
+        if name == "allegro":
+            assert torch.allclose(dq, tau / kp)
+        else:  # a tendon pair moves evenly and is pulled by the mean of its two wanted torques
+            j1, j2 = h.joint_names.index("rh_FFJ1"), h.joint_names.index("rh_FFJ2")
+            assert abs(float(dq[j1] - dq[j2])) < 1e-12
+            assert abs(float(kp * (dq[j1] + dq[j2])) - float(tau[j1] + tau[j2]) / 2) < 1e-12
