@@ -202,3 +202,21 @@ def test_unsupported_kinematics_is_caught_at_load(tmp_path):
     with pytest.raises(HandSpecError, match="disagrees with MuJoCo") as err:
         load_hand(path)
     assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("name", list(BUILTIN_HANDS))
+def test_builtin_couplings_are_the_ones_the_mjcf_implies(name):
+    """Every built-in spec's couplings come from its MJCF: Shadow's tight J0/J1 tendons (ratio
+    1.14), Shadow E3M5's actuated J1 + J2 tendons (equal shares: 1.0), none on Allegro and LEAP."""
+    import mujoco
+
+    from datagen.hands.mjcf import detect_couplings, flatten_hand, resolve_asset
+
+    spec = load_spec(builtin_spec_path(name))
+    flat = flatten_hand(resolve_asset(spec.mjcf, spec.source_file), spec.root_body, name=spec.name,
+                        position_kp=spec.position_actuator_kp)
+    found = detect_couplings(mujoco.MjModel.from_xml_path(str(flat.path)))
+    assert {(c.joint, c.leader, round(c.ratio, 6)) for c in found} == \
+        {(c.joint, c.leader, round(c.ratio, 6)) for c in spec.couplings}
+    expected = {"shadow": 4, "shadow_e3m5": 4, "allegro": 0, "leap": 0}[name]
+    assert len(spec.couplings) == expected
