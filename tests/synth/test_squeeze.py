@@ -274,12 +274,13 @@ def test_hand_squeeze_is_the_statics_of_all_touching_links(hand):
     assert torch.allclose(pre, hand64.apply_couplings(2 * joints - sq))
 
 
-def test_actuator_compliance_gives_least_squares_actuator_forces():
-    """Shadow E3M5 drives each finger's J1 + J2 by one tendon actuator. For any wanted joint
-    torques tau, the squeeze displacement dq = P tau / kp must make actuator forces
-    F = kp A dq (A: the hand's ctrl matrix, from its MJCF) whose joint torques A^T F are the least-
-    squares match of tau: the normal equations A (A^T F - tau) = 0 over the movable joints. One
-    actuator per joint (Allegro): dq = tau / kp exactly."""
+def test_actuator_compliance_gives_the_wanted_generalized_forces():
+    """The squeeze displacement dq = P tau / kp (tau: wanted generalized forces on the hand's
+    independent joints) must make position actuators of stiffness kp, with the transmissions of
+    the hand's MJCF (ctrl = A q), do the virtual work tau on every movable independent joint:
+    for a virtual displacement of joint j through the hand's couplings (Shadow E3M5: one tendon
+    actuator pulls J1 + J2, coupled 1:1), (A^T F) . dq_j = tau_j, F = kp A (squeeze - grasp).
+    One actuator per joint (Allegro): dq = tau / kp exactly."""
     from datagen.synth.squeeze import actuator_compliance
     from datagen.synth.synthesize import finger_joint_mask
 
@@ -287,16 +288,22 @@ def test_actuator_compliance_gives_least_squares_actuator_forces():
     for name in ("shadow_e3m5", "allegro"):
         h = load_hand(name, dtype=torch.float64)
         movable = finger_joint_mask(h)
-        A = torch.as_tensor(h.ctrl_matrix, dtype=torch.float64)[:, movable]
-        A = A[A.abs().sum(1) > 0]  # actuators of movable joints
+        followers = {c[0] for c in h._couple}
+        A = torch.as_tensor(h.ctrl_matrix, dtype=torch.float64)
+        q0 = h.apply_couplings(0.5 * (h.joint_lower + h.joint_upper))
         tau = torch.randn(h.num_joints, dtype=torch.float64, generator=torch.Generator().manual_seed(4))
-        tau = tau * movable
+        tau = tau * movable * torch.tensor([j not in followers for j in range(h.num_joints)])
         dq = actuator_compliance(h, movable) @ tau / kp
-        F = kp * (A @ dq[movable])
-        assert (A @ (A.T @ F - tau[movable])).abs().max() < 1e-9
+        F = kp * (A @ (h.apply_couplings(q0 + dq) - q0))
+        checked = 0
+        for j in range(h.num_joints):
+            if not movable[j] or j in followers:
+                continue
+            e = torch.zeros_like(q0)
+            e[j] = 1e-6
+            work = float((A.T @ F) @ (h.apply_couplings(q0 + e) - q0)) / 1e-6
+            assert abs(work - float(tau[j])) < 1e-6, (name, h.joint_names[j], work, float(tau[j]))
+            checked += 1
+        assert checked >= 12
         if name == "allegro":
             assert torch.allclose(dq, tau / kp)
-        else:  # a tendon pair moves evenly and is pulled by the mean of its two wanted torques
-            j1, j2 = h.joint_names.index("rh_FFJ1"), h.joint_names.index("rh_FFJ2")
-            assert abs(float(dq[j1] - dq[j2])) < 1e-12
-            assert abs(float(kp * (dq[j1] + dq[j2])) - float(tau[j1] + tau[j2]) / 2) < 1e-12
