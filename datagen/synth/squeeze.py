@@ -44,6 +44,30 @@ def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     return g.reshape(R, B, J).transpose(0, 1)
 
 
+def _damped_step(J: torch.Tensor, e: torch.Tensor, damping_m: float) -> torch.Tensor:
+    """``(B, J)`` damped least-squares joint step ``J^T (J J^T + lambda^2 I)^-1 e`` moving the
+    points of Jacobian ``J (B, 3F, J)`` by ``e (B, F, 3)``."""
+    eye = torch.eye(J.shape[1], dtype=J.dtype, device=J.device)
+    return (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye,
+                                                    e.reshape(e.shape[0], -1, 1))).squeeze(-1)
+
+
+def _balance(f: torch.Tensor) -> torch.Tensor:
+    """``(B,)`` 1 - |sum f| / sum |f| of forces ``(B, C, 3)``: 1 a pure grip, 0 all pushing one way."""
+    return (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)
+
+
+def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m):
+    """``(pregrasp, squeeze)``: the squeeze is the grasp plus the joint displacement whose
+    actuators exert ``J_force^T f`` (:func:`actuator_compliance`) plus the fingertips' motion
+    ``approach_m`` along their normals; the pregrasp is its mirror image about the grasp."""
+    tau = (J_force.transpose(1, 2) @ f.reshape(f.shape[0], -1, 1)).squeeze(-1)
+    dq_force = tau @ actuator_compliance(hand, movable).T / kp
+    dq_gap = _damped_step(J_tips, approach_m * inward_normals, damping_m)
+    squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
+    return hand.apply_couplings(2 * joints - squeeze), squeeze
+
+
 def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                    inward_normals: torch.Tensor, distance_m: float, movable: torch.Tensor,
                    damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
@@ -58,11 +82,8 @@ def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphe
         movable: ``(J,)`` bool, joints the motion may use (False: held at the grasp).
         damping_m: lambda of the damped least squares, m/rad (keeps dq bounded near singularities).
     """
-    B, F = inward_normals.shape[:2]
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
-    e = (-distance_m * inward_normals).reshape(B, 3 * F, 1)  # outward motion of each fingertip
-    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
-    dq = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
+    dq = _damped_step(J, -distance_m * inward_normals, damping_m)  # outward motion of each fingertip
     pre = hand.apply_couplings(joints + dq)
     squeeze = hand.apply_couplings(2 * joints - pre)
     return pre, squeeze
@@ -178,19 +199,10 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     geometry). The pregrasp is the mirror image
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
     """
-    B, F = points.shape[:2]
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
     f = balanced_forces(points, inward_normals, mu)
-    balance = (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)  # (B,)
-    f = f * (force_n * balance / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
-    tau = (J.transpose(1, 2) @ f.reshape(B, 3 * F, 1)).squeeze(-1)
-    dq_force = tau @ actuator_compliance(hand, movable).T / kp
-    e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
-    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
-    dq_gap = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
-    squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
-    pre = hand.apply_couplings(2 * joints - squeeze)
-    return pre, squeeze
+    f = f * (force_n * _balance(f) / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    return _grip(hand, joints, J, f, J, inward_normals, movable, kp, approach_m, damping_m)
 
 
 def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
@@ -218,19 +230,11 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), others], 1)
     lo = torch.cat([P.new_ones(B, F), P.new_zeros(B, links.shape[0])], 1)
     f = balanced_forces(P, N, mu, min_normal=lo, active=active)
-    balance = (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)  # (B,)
-    f = f * (force_n * balance / f[:, :F].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    f = f * (force_n * _balance(f) / f[:, :F].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
     all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
     Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
-    tau = (Jc.transpose(1, 2) @ f.reshape(B, -1, 1)).squeeze(-1)
-    dq_force = tau @ actuator_compliance(hand, movable).T / kp
     Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
-    e = (approach_m * inward_normals).reshape(B, 3 * F, 1)
-    eye = torch.eye(3 * F, dtype=joints.dtype, device=joints.device)
-    dq_gap = (Jt.transpose(1, 2) @ torch.linalg.solve(Jt @ Jt.transpose(1, 2) + damping_m ** 2 * eye, e)).squeeze(-1)
-    squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
-    pre = hand.apply_couplings(2 * joints - squeeze)
-    return pre, squeeze
+    return _grip(hand, joints, Jc, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
 
 
 def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch.Tensor, torch.Tensor]:
