@@ -7,6 +7,9 @@ CPU seconds per grasp (process time, one thread) of, on the same grasps and in o
   epsilon included);
 * ``project, spec``: the same with ``hand_root: spec``, the default (the forearm and driven wrist
   joints);
+* ``project, spec, early pass``: the same with ``settle_checks: 2`` (off by default): a passing
+  direction stops once its creep has settled instead of running the whole hold (an
+  approximation of the protocol, see datagen/eval/hold.py);
 * ``peer loop``: a re-implementation of the loop structure of DexGraspBench's ``fcMocapEval``
   (read, not copied; github.com/JYChen18/DexGraspBench src/task/eval_func/{base,fc_mocap}.py):
   the hand rooted at the palm (its Shadow MJCF has no forearm), a pregrasp penetration check,
@@ -140,9 +143,11 @@ def main(argv=None) -> None:
         grasps = load_grasps(args.grasps, args.limit, Path(tmp))
         project = Evaluator(hand, EvalConfig(hand_root="palm"))
         spec = Evaluator(hand, EvalConfig(hand_root="spec"))
+        early = Evaluator(hand, EvalConfig(hand_root="spec", settle_checks=2))
         peer = Evaluator(hand, EvalConfig(hand_root="palm"))
         modes = {"project, hand_root palm": lambda p, q: project.evaluate(p, q).success,
                  "project (default), hand_root spec": lambda p, q: spec.evaluate(p, q).success,
+                 "project, hand_root spec, early pass (settle_checks 2)": lambda p, q: early.evaluate(p, q).success,
                  "peer loop (palm-rooted, closing per direction)": lambda p, q: peer_loop(peer, p, q)}
         results = {k: run_mode(fn, grasps, args.repeats) for k, fn in modes.items()}
         reasons = [project.evaluate(p, q).reason for _, p, q in grasps]
