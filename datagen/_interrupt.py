@@ -18,15 +18,21 @@ is still importing waits until `on_sigint` sets its policy: pending, it then end
 
     with sigint_blocked():
         proc.start()            # the child calls on_sigint("die") first
+
+Native code that runs its own threads (SciPy's ``cKDTree.query(workers=-1)``) must not be left by
+a KeyboardInterrupt: its threads would go on with freed arrays and crash the interpreter as it
+exits. `sigint_deferred` holds a Ctrl-C until such a call has returned.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
+import threading
 from typing import Iterator
 
-__all__ = ["on_sigint", "sigint_blocked"]
+__all__ = ["on_sigint", "sigint_blocked", "sigint_deferred"]
 
 
 @contextlib.contextmanager
@@ -47,3 +53,24 @@ def on_sigint(policy: str) -> None:
         raise ValueError(f"on_sigint: policy must be 'die' or 'ignore', got {policy!r}")
     signal.signal(signal.SIGINT, signal.SIG_DFL if policy == "die" else signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """In the main thread, hold a SIGINT that arrives inside the block (or arrived just before it
+    and is not handled yet) until the block ends, then handle it as before (KeyboardInterrupt).
+    Elsewhere a no-op: only the main thread gets KeyboardInterrupt."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if held:
+            if callable(old):
+                old(signal.SIGINT, None)  # Python's default handler raises KeyboardInterrupt
+            elif old == signal.SIG_DFL:
+                os.kill(os.getpid(), signal.SIGINT)
