@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 import datagen
@@ -149,6 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("\n" + interrupted_line(args, argv), file=sys.stderr)  # after a progress bar's line
         return 130
+    except BrokenPipeError:  # stdout closed early (`datagen hands | head -1`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit's flush
+        return 141  # the shell's code for SIGPIPE, as a command killed by it
 
 
 if __name__ == "__main__":

@@ -44,6 +44,14 @@ def test_the_interrupted_line_names_the_command_and_its_output():
                                                                   "rerun the command")
 
 
+def test_a_closed_stdout_is_not_a_traceback():
+    # `true` exits before the command prints: its output goes to a closed pipe (`datagen tasks | head`)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(["bash", "-c", f"{sys.executable} -m datagen.cli tasks | true; exit ${{PIPESTATUS[0]}}"],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert (proc.returncode, proc.stderr) == (141, "")
+
+
 def _group_alive(pgid: int) -> list[str]:
     """Processes of group ``pgid`` that still run (zombies excluded: reaped by init), as 'pid name'."""
     out = []
