@@ -1,8 +1,9 @@
 """The ``datagen`` command line: argparse subcommands registered from each package.
 
 To add a subcommand, write ``register(sub)`` in your package (it calls ``sub.add_parser`` and
-sets ``func`` to a handler taking the parsed args and returning an exit code) and add one
-line to ``REGISTRARS``. Only the registrar of the command being run is imported (all of them for
+sets ``func`` to a handler taking the parsed args and returning an exit code, and ``interrupted``
+to what a Ctrl-C leaves and how to go on, formatted with the parsed args: see `interrupted_line`)
+and add one line to ``REGISTRARS``. Only the registrar of the command being run is imported (all of them for
 ``datagen --help``), so one package's heavy imports never slow another's subcommand. Every
 option has a help text; the help shows its default (`HelpFormatter`).
 """
@@ -12,11 +13,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 import datagen
 
-__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "install_log_handler", "main"]
+__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "install_log_handler", "interrupted_line", "main"]
 
 # subcommand name -> "module:function" registering it
 REGISTRARS: dict[str, str] = {
@@ -115,19 +117,42 @@ def install_log_handler() -> None:
         logger.addHandler(handler)
 
 
+def interrupted_line(args: argparse.Namespace | None, argv: list[str]) -> str:
+    """The one line a Ctrl-C prints: the command, ``interrupted``, and its ``interrupted`` default
+    (what was kept, how to go on) formatted with the parsed arguments."""
+    command = args.command if args is not None else next((a for a in argv if a in REGISTRARS), "")
+    what = getattr(args, "interrupted", None)
+    if what:
+        what = what.format(**vars(args))
+    else:  # interrupted while parsing or importing: nothing has been done yet
+        what = "nothing was done; rerun the command"
+    return f"datagen{' ' + command if command else ''}: interrupted; {what}"
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; its exit code. A domain error is one line and exit 2; Ctrl-C is one line
+    (`interrupted_line`) and exit 130, the shell's code for SIGINT. Outputs are written atomically
+    (`datagen._atomic`), so an interrupted command leaves no half-written file."""
     from datagen.gl import drop_unusable
 
     install_log_handler()
 
     drop_unusable()  # a MUJOCO_GL that would make `import mujoco` fail is dropped, with a warning
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser(_command(argv)).parse_args(argv)
+    args = None
     try:
-        return int(args.func(args) or 0)
-    except _domain_errors() as exc:
-        print(f"datagen {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        args = build_parser(_command(argv)).parse_args(argv)
+        try:
+            return int(args.func(args) or 0)
+        except _domain_errors() as exc:
+            print(f"datagen {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+    except KeyboardInterrupt:
+        print("\n" + interrupted_line(args, argv), file=sys.stderr)  # after a progress bar's line
+        return 130
+    except BrokenPipeError:  # stdout closed early (`datagen hands | head -1`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit's flush
+        return 141  # the shell's code for SIGPIPE, as a command killed by it
 
 
 if __name__ == "__main__":

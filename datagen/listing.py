@@ -64,9 +64,9 @@ def _print(rows: list[tuple[str, str, str]]) -> None:
 
 def register_hands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("hands", help="list the built-in hands (--hand NAME; a hand spec YAML path works too)")
-    p.set_defaults(func=lambda args: _print(hand_rows()) or 0)
+    p.set_defaults(func=lambda args: _print(hand_rows()) or 0, interrupted="nothing was written")
 
 
 def register_tasks(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tasks", help="list the built-in tasks (--task/--tasks NAME; a task YAML path works too)")
-    p.set_defaults(func=lambda args: _print(task_rows()) or 0)
+    p.set_defaults(func=lambda args: _print(task_rows()) or 0, interrupted="nothing was written")

@@ -37,7 +37,10 @@ def register_run(sub: argparse._SubParsersAction) -> None:
                    help="also rerun finished shards with failures a rerun may fix (timeout, crashed, error, "
                         "missing_file, ...); failures decided by a mesh's bytes are final")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=_run)
+    # Ctrl-C (datagen.cli.main): running shards are abandoned with Ray's shutdown; their files are
+    # written atomically and only a ledger entry marks a shard finished, so a rerun redoes exactly
+    # the unfinished ones
+    p.set_defaults(func=_run, interrupted="rerun the same command to resume")
 
 
 def _renamed_scale(value: str):
@@ -105,11 +108,6 @@ def _run(args) -> int:
     except JobError as exc:
         print(f"datagen run: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        # running shards were abandoned with Ray's shutdown; their files are written atomically and
-        # only a ledger entry marks a shard finished, so a rerun redoes exactly the unfinished ones
-        print("\ndatagen run: interrupted; rerun the same command to resume", file=sys.stderr)
-        return 130
     print(format_status(status))
     print(closing_summary(status))
     return 0 if status["complete"] else 1
@@ -119,7 +117,7 @@ def register_status(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("status", help="progress and outcomes of a job directory")
     p.add_argument("job", help="job directory")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(func=_status)
+    p.set_defaults(func=_status, interrupted="nothing was written")
 
 
 def _status(args) -> int:
@@ -140,7 +138,8 @@ def register_report(sub: argparse._SubParsersAction) -> None:
     p.add_argument("job", help="job directory")
     p.add_argument("--renders", type=int, default=6,
                    help="grasps to draw, successes and failures alternately, across objects (0: none)")
-    p.set_defaults(func=_report)
+    p.set_defaults(func=_report, interrupted="{job}/README.md is unchanged (pictures already drawn are kept in "
+                   "{job}/renders); rerun the same command")
 
 
 def _report(args) -> int:

@@ -103,8 +103,8 @@ def _render(job: JobDir, rows: pa.Table | None, n: int) -> tuple[list[tuple[str,
     if n <= 0 or rows is None:
         return [], "Rendering was skipped (--renders 0)."
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
 
+    from datagen._interrupt import on_sigint, sigint_blocked
     from datagen.gl import GLUnavailable, select_backend
 
     try:
@@ -112,8 +112,10 @@ def _render(job: JobDir, rows: pa.Table | None, n: int) -> tuple[list[tuple[str,
     except GLUnavailable as exc:
         return [], f"No grasp pictures: {exc}. Rerun `datagen report` once a backend works."
     picked = rows.take(pick_renders(rows["success"].to_pylist(), rows["object_id"].to_pylist(), n)).to_pylist()
-    with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
-        paths, note = pool.submit(_render_rows, str(job.path), picked).result()
+    with sigint_blocked():  # Ctrl-C: the renderer ignores it, and the pool's exit here ends it
+        pool = mp.get_context("spawn").Pool(1, initializer=on_sigint, initargs=("ignore",))
+    with pool:
+        paths, note = pool.apply(_render_rows, (str(job.path), picked))
     return [(p, _caption(r)) for p, r in zip(paths, picked)], note
 
 

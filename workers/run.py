@@ -1,7 +1,8 @@
 """The Ray driver of a dataset job: manifest -> shards -> Ray tasks (`shard.run_shard`) -> ledger.
 
 Without an address (argument or ``RAY_ADDRESS``) it starts a local Ray with every core, no
-dashboard, and its temp dir inside the job directory. Ray puts Unix sockets under
+dashboard, every port on the loopback interface and its temp dir inside the job directory
+(`start_local_ray`). Ray puts Unix sockets under
 ``<temp>/session_<date>_<pid>/sockets/``, and a socket path may not exceed 107 bytes, so when
 ``<job>/ray`` is longer than `MAX_RAY_TEMP_LEN` characters a short ``/tmp/dg-ray-XXXX`` is used
 instead (named by a hash of the job path; printed, and removed at the end). With an address it joins that cluster; the
@@ -29,9 +30,10 @@ from .job import JobConfig, JobDir, JobError, code_version, package_versions, sh
 from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
-           "MAX_RAY_TEMP_LEN"]
+           "MAX_RAY_TEMP_LEN", "start_local_ray"]
 
 MAX_RAY_TEMP_LEN = 40
+LOOPBACK = "127.0.0.1"  # the local cluster's node address: Ray then listens on loopback only
 TASK_RETRIES = 3  # a shard whose node dies is rerun elsewhere (shards are idempotent)
 
 
@@ -121,6 +123,38 @@ def _ray_temp_dir(job: JobDir) -> tuple[str, bool]:
         raise JobError(f"{short} (Ray's temp dir for this job) belongs to another user; remove it")
     os.chmod(short, 0o700)
     return str(short), True
+
+
+def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | None:
+    """Start the job's local Ray: every core (or ``num_cpus``), no dashboard, its temp dir private
+    (`_ray_temp_dir`), every port on the loopback interface. Returns the temp dir to remove at the
+    end (a ``/tmp/dg-ray-*`` one), else None.
+
+    Ray binds its gRPC servers (GCS, raylet, object manager, each worker's), its agents and the
+    metrics exporter to the loopback interface when the node's address is loopback, but on Linux
+    it replaces a loopback ``_node_ip_address`` by the machine's address unless its single-machine
+    mode is on (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, the default on macOS and Windows; read
+    when ``ray`` is imported, so it is set here on Ray's constant for the duration of ``init``).
+    """
+    tmp, private = _ray_temp_dir(job)
+    if private:
+        log(f"ray temp dir {tmp} (the job path is too long for Ray's Unix sockets)")
+    constants = getattr(getattr(ray, "_private", None), "ray_constants", None)
+    single = getattr(constants, "ENABLE_RAY_CLUSTER", None)
+    if single is not None:
+        constants.ENABLE_RAY_CLUSTER = False
+    try:
+        ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
+                 _node_ip_address=LOOPBACK, log_to_driver=False, configure_logging=False)
+    finally:
+        if single is not None:
+            constants.ENABLE_RAY_CLUSTER = single
+    os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
+    node_ip = ray.util.get_node_ip_address()
+    if node_ip not in (LOOPBACK, "::1"):
+        log(f"warning: Ray {ray.__version__} put the local cluster on {node_ip}, not on the loopback interface: "
+            "its ports listen on every interface; on a shared network, firewall them")
+    return tmp if private else None
 
 
 def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_cpus: int | None = None,
@@ -242,16 +276,10 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
     for i in todo:  # a killed run's progress is stale
         job.progress_path(i).unlink(missing_ok=True)
     if not ray.is_initialized():
-        if address:
+        if address and address != "local":  # "local": Ray's name for a new local cluster
             ray.init(address=address, log_to_driver=False)
         else:
-            tmp, private = _ray_temp_dir(job)
-            private_tmp = tmp if private else None
-            if private:
-                log(f"ray temp dir {tmp} (the job path is too long for Ray's Unix sockets)")
-            ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
-                     log_to_driver=False, configure_logging=False)
-            os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
+            private_tmp = start_local_ray(ray, job, num_cpus, log)
         started = True
     try:
         gpus = cfg.gpus_per_shard if ray.cluster_resources().get("GPU", 0) > 0 else 0

@@ -36,7 +36,7 @@ def register_eval(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes evaluating rows in parallel")
     p.add_argument("--threads", type=int, default=None,
                    help="threads per grasp stepping the six directions (default: EvalConfig.threads)")
-    p.set_defaults(func=_eval)
+    p.set_defaults(func=_eval, interrupted="nothing written to {out}; rerun the same command")
 
 
 def _eval(args) -> int:
@@ -67,7 +67,8 @@ def register_render(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol's constants)")
     p.add_argument("--width", type=int, default=320, help="width of one view, pixels")
     p.add_argument("--height", type=int, default=240, help="height of one view, pixels")
-    p.set_defaults(func=_render)
+    p.set_defaults(func=_render, interrupted="the pictures already in {out} are complete; rerun the same command "
+                   "for all of them")
 
 
 def _render(args) -> int:

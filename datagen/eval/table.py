@@ -23,13 +23,14 @@ names). Row order is kept.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ProcessPoolExecutor
+import multiprocessing as mp
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from datagen._interrupt import on_sigint, sigint_blocked
 from schemas import arrow_schema, declaration
 
 from .config import EvalConfig, EvalError
@@ -147,9 +148,12 @@ def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", 
     else:
         n = min(workers, len(rows))
         bounds = np.linspace(0, len(rows), n + 1).astype(int)
-        with ProcessPoolExecutor(n) as pool:
-            parts = pool.map(_evaluate_rows, [rows[a:b] for a, b in zip(bounds[:-1], bounds[1:])],
-                             [str(base)] * n, [cfg_d] * n)
+        # workers ignore Ctrl-C; interrupted, this process ends them (the pool's exit: terminate)
+        with sigint_blocked():
+            pool = mp.Pool(n, initializer=on_sigint, initargs=("ignore",))
+        with pool:
+            parts = pool.starmap(_evaluate_rows, [(rows[a:b], str(base), cfg_d)
+                                                  for a, b in zip(bounds[:-1], bounds[1:])])
             results = [r for part in parts for r in part]
     return append_results(table, results)
 

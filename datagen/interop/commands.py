@@ -19,7 +19,8 @@ def register_export(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=FORMATS_OUT, default="dexgraspbench", help="output format")
     p.add_argument("--out", required=True, help="output directory (graspdata/ and objects/ are written there)")
     p.add_argument("--only-success", action="store_true", help="export only grasps with success = true")
-    p.set_defaults(func=_export)
+    p.set_defaults(func=_export, interrupted="the grasp files and objects already under {out} are complete; rerun "
+                   "the same command to write them all")
 
 
 def _export(args) -> int:
@@ -57,7 +58,8 @@ def register_import(sub: argparse._SubParsersAction) -> None:
                         "current one); bodex: BODex's src/curobo/content directory, for scene paths written "
                         "on another machine")
     p.add_argument("--task", default="force_closure", help="task recorded on the rows (the test datagen eval runs)")
-    p.set_defaults(func=_import)
+    p.set_defaults(func=_import, interrupted="nothing written to {out} (the objects already imported into its "
+                   "objects/ folder are complete); rerun the same command")
 
 
 def _files(items: list[str]) -> list[Path]:
@@ -79,6 +81,7 @@ def _import(args) -> int:
     import pyarrow.parquet as pq
     import torch
 
+    from datagen._atomic import atomic_path
     from datagen.hands import load_hand
 
     from .rows import imported_table
@@ -97,7 +100,8 @@ def _import(args) -> int:
 
         cols = read_bodex_files(files, hand, out.parent / "objects", root)
     table = imported_table(cols, hand, args.format, args.task)
-    pq.write_table(table, out)
+    with atomic_path(out) as tmp:
+        pq.write_table(table, tmp)
     print(f"wrote {out}: {table.num_rows} grasps of {len(set(cols['object_id']))} objects; next: "
           f"datagen eval {out} --out EVALUATED.parquet", file=sys.stderr)
     return 0

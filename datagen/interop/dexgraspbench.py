@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from datagen._atomic import atomic_path
+
 from .frames import PeerHand, from_peer, matrix_to_pose7, pose7_to_matrix, to_peer
 from .objects import export_object, import_object
 
@@ -82,7 +84,8 @@ def export_grasps(table: pa.Table, base: Path, out: Path, hand) -> list[Path]:
         data = {"obj_path": str(folders[key]), "obj_scale": float(r["object_scale_m"]),
                 "obj_pose": np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float64), "grasp_id": r["grasp_id"]}
         data.update({k: poses[j].astype(np.float32) for j, k in enumerate(POSE_KEYS)})
-        np.save(path, data, allow_pickle=True)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # a file object: np.save would add ".npy"
+            np.save(fh, data, allow_pickle=True)
         written.append(path)
     return written
 

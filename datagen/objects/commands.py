@@ -20,10 +20,11 @@ def register_manifest(sub: argparse._SubParsersAction) -> None:
                    help="object scales: metres per normalized unit (the bounding-box diagonal is 2 scale), "
                         "or 'native' to keep the mesh's own size (its coordinates in metres)")
     b.add_argument("--test-fraction", type=float, default=0.1, help="share of objects in the test split")
-    b.set_defaults(func=_manifest_build)
+    b.set_defaults(func=_manifest_build, interrupted="nothing written to {out} (it is written at the end); "
+                   "rerun the same command")
     c = msub.add_parser("check", help="validate a manifest")
     c.add_argument("manifest", help="manifest file (JSONL)")
-    c.set_defaults(func=_manifest_check)
+    c.set_defaults(func=_manifest_check, interrupted="nothing was written")
 
 
 def _scale_arg(text: str):
@@ -64,7 +65,8 @@ def register_prepare(sub: argparse._SubParsersAction) -> None:
                    help="seconds one object may take; it is then killed and recorded as a timeout failure "
                         "(default: 600)")
     p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
-    p.set_defaults(func=_prepare)
+    p.set_defaults(func=_prepare, interrupted="the objects finished so far are in the cache and are not processed "
+                   "again (no --results file was written); rerun the same command to process the rest")
 
 
 def _prepare(args) -> int:

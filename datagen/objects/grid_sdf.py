@@ -21,6 +21,8 @@ import torch.nn.functional as F
 import trimesh
 from scipy.spatial import cKDTree
 
+from datagen._interrupt import sigint_deferred
+
 __all__ = ["GridSDF"]
 
 
@@ -48,7 +50,10 @@ class GridSDF:
         hi = mesh.vertices.max(0) + margin
         axes = [np.linspace(lo[i], hi[i], resolution) for i in range(3)]
         nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-        dist, idx = cKDTree(pts).query(nodes, k=8, workers=-1)
+        # Ctrl-C waits for the query's end: an interrupted query leaves SciPy's worker threads
+        # running on freed arrays, and the interpreter crashes (SIGSEGV) when it exits
+        with sigint_deferred():
+            dist, idx = cKDTree(pts).query(nodes, k=8, workers=-1)
         votes = ((nodes[:, None] - pts[idx]) * normals[idx]).sum(-1) >= 0  # (N, 8) outside?
         sign = np.where(votes[:, 0], 1.0, -1.0)
         dist = dist[:, 0]

@@ -16,7 +16,7 @@ from datagen._atomic import atomic_write_text
 
 from .cache import cache_root, clean_stale_temp
 from .config import ProcessConfig
-from .isolate import Step, process_isolated
+from .isolate import Children, Step, process_isolated
 from .manifest import ManifestEntry, load_manifest
 from .process import ProcessedObject, process_object
 
@@ -39,7 +39,9 @@ def prepare(manifest: str | Path | list[ManifestEntry], cfg: ProcessConfig | Non
     ``timeout_s`` seconds, ``workers`` at a time. Returns one status dict per object, in manifest
     order: id, status ('ok'/'failed'), reason, message, entry, cache_hit, pieces, timings
     (seconds per stage). Temp dirs left by killed runs (> 6 h old) are removed first. ``step``:
-    what each process runs (`process_object`; tests inject a slow or crashing one)."""
+    what each process runs (`process_object`; tests inject a slow or crashing one). Interrupted
+    (KeyboardInterrupt), it kills the processes still running and re-raises: the objects finished
+    so far are in the cache, so the same call again processes only the others."""
     if not timeout_s > 0:
         raise ValueError(f"the per-object time limit must be > 0 seconds, got {timeout_s}")
     entries = load_manifest(manifest) if isinstance(manifest, (str, Path)) else list(manifest)
@@ -51,16 +53,25 @@ def prepare(manifest: str | Path | list[ManifestEntry], cfg: ProcessConfig | Non
         from tqdm import tqdm
         bar = tqdm(total=len(entries), desc="prepare", unit="obj")
 
+    children = Children()
+
     def one(entry: ManifestEntry) -> dict:
         r = process_isolated(entry, cfg, root, timeout_s, step=step,
-                             remedy="raise `datagen prepare --timeout` and rerun")
+                             remedy="raise `datagen prepare --timeout` and rerun", children=children)
         bar and bar.update()
         return _row(entry, r)
 
     # threads only wait: each object's work is in its own process
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    pool = ThreadPoolExecutor(max_workers=max(1, workers))
+    try:
         out = list(pool.map(one, entries))
-    bar and bar.close()
+    except BaseException:  # Ctrl-C: end the objects in progress instead of waiting for them
+        pool.shutdown(wait=False, cancel_futures=True)
+        children.stop()
+        raise
+    finally:
+        pool.shutdown(wait=True)
+        bar and bar.close()
     return out
 
 

@@ -14,11 +14,17 @@ __all__ = ["load_object", "register_synth"]
 
 def load_object(path: str | Path, cache: str | None = None, process_config: str | None = None):
     """The processed object (`datagen.objects.ProcessedObject`, status ok) of a raw mesh file
-    (processed through the objects cache) or of a processed-object directory (one holding
+    (processed through the objects cache, in a child process as `datagen prepare` does it: a
+    Ctrl-C or a CoACD crash ends only that process) or of a processed-object directory (one holding
     ``meta.json``). Raises FileNotFoundError or ValueError naming the object and the reason."""
+    import hashlib
+
     from datagen.objects import layout
     from datagen.objects.config import ProcessConfig
-    from datagen.objects.process import load_processed, process_object
+    from datagen.objects.isolate import process_isolated
+    from datagen.objects.manifest import ManifestEntry
+    from datagen.objects.prepare import DEFAULT_TIMEOUT_S
+    from datagen.objects.process import load_processed
     from datagen.objects.sources import resolve
 
     p = Path(path)
@@ -27,7 +33,10 @@ def load_object(path: str | Path, cache: str | None = None, process_config: str 
     elif p.is_file():
         ref = resolve(f"dir:{p.parent.resolve()}", p.name, p.stem)
         cfg = ProcessConfig.from_yaml(process_config) if process_config else ProcessConfig()
-        processed = process_object(ref, cfg, root=cache)
+        entry = ManifestEntry(ref.object_id, ref.source, ref.path, ref.family,
+                              hashlib.sha256(ref.read_bytes()).hexdigest(), (), "train")
+        processed = process_isolated(entry, cfg, cache, DEFAULT_TIMEOUT_S,
+                                     remedy="process it first with `datagen prepare --timeout SECONDS`")
     else:
         raise FileNotFoundError(f"object {p} is neither a mesh file nor a processed-object directory")
     if not processed.ok:
@@ -52,7 +61,8 @@ def register_synth(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--out", required=True, help="output Parquet file")
-    p.set_defaults(func=_synth)
+    p.set_defaults(func=_synth, interrupted="nothing written to {out}; rerun the same command (a processed object "
+                   "stays in the cache)")
 
 
 def _synth(args) -> int:

@@ -26,7 +26,8 @@ def register_view(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=int, default=4, help="with --export: how many matching rows (default 4)")
     for name in ("verdict", "reason", "task", "hand", "object"):
         p.add_argument(f"--{name}", default=None, help=f"with --export: only rows of this {name}")
-    p.set_defaults(func=_view)
+    p.set_defaults(func=_view, interrupted="no page is half-written (with --export, index.html is written "
+                   "last); rerun the same command")
 
 
 def _need_viser() -> None:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+from datagen._atomic import atomic_write_text
+
 from .draw import GraspDrawing, camera_for
 from .panel import METRICS, format_value, unit_of, verdict_line
 from .posing import STATES, SceneCache
@@ -60,7 +62,7 @@ def export_html(source: GraspSource, rows: list[int], out_dir: str | Path, *,
                 draw(state)
             recording.insert_sleep(seconds_per_pose)
             page = out / _page_name(source, i)
-            page.write_text(recording.as_html())
+            atomic_write_text(page, recording.as_html())
             pages.append(page)
             server.scene.reset()
     finally:
@@ -88,4 +90,4 @@ def _write_index(source: GraspSource, rows: list[int], pages: list[Path], path: 
         cells += [html.escape(format_value(row[c], unit_of(schema.field(c)))) for c, _ in metric_cols]
         lines.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     lines.append("</table>")
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n")

@@ -84,6 +84,22 @@ def _interrupted(tmp, capsys, monkeypatch):
     return _run(tmp, capsys)
 
 
+def _ctrl_c(monkeypatch, module: str, name: str) -> None:
+    """``module.name`` raises KeyboardInterrupt, as a Ctrl-C there does (a real SIGINT: tests/test_cli.py)."""
+    import importlib
+
+    def ctrl_c(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib.import_module(module), name, ctrl_c)
+
+
+def _interrupted_command(tmp, capsys, monkeypatch, where: tuple[str, str], args: list[str]):
+    _ctrl_c(monkeypatch, *where)
+    code = cli.main(args)
+    return code, capsys.readouterr().err
+
+
 def _different_job(tmp, capsys):
     JobDir(tmp / "job").init(tiny_config(_src(tmp), seed=5))
     return _run(tmp, capsys)
@@ -134,6 +150,13 @@ COMMANDS = {
     "`--cache` an existing file": lambda t, c, m: _run(t, c, "--cache", str(_file(t / "c"))),
     "`--out` of a running job": lambda t, c, m: _locked(t, c),
     "Ctrl-C during `run`": lambda t, c, m: _interrupted(t, c, m),
+    "Ctrl-C during `prepare`": lambda t, c, m: _interrupted_command(
+        t, c, m, ("datagen.objects.prepare", "prepare"), ["prepare", "--manifest", str(t / "m.jsonl")]),
+    "Ctrl-C during `synth`": lambda t, c, m: _interrupted_command(
+        t, c, m, ("datagen.pipeline.commands", "load_object"),
+        ["synth", "--object", str(_box(t / "box.obj")), "--out", str(t / "g.parquet")]),
+    "Ctrl-C during `eval`": lambda t, c, m: _interrupted_command(
+        t, c, m, ("datagen.eval.table", "read_grasps"), ["eval", str(t / "g.parquet"), "--out", str(t / "e.parquet")]),
     "manifest line nested 100000 deep": lambda t, c, m: _manifest_check(t, c, "[" * 100_000 + "]" * 100_000 + "\n"),
     "`synth --num 0`": lambda t, c, m: _synth_num_0(t, c),
 }

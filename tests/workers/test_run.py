@@ -1,10 +1,14 @@
 """The Ray driver: a killed driver resumes without losing or duplicating rows, a lost worker node
-does not lose the job, a different config on the same directory is refused."""
+does not lose the job, a different config on the same directory is refused, the local cluster
+listens on the loopback interface only."""
 
 from __future__ import annotations
 
+import ipaddress
 import os
+import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -15,7 +19,7 @@ import pytest
 import yaml
 
 from workers.job import JobDir, JobError
-from workers.run import run_job
+from workers.run import run_job, start_local_ray
 
 from .conftest import comparable_rows, tiny_config
 from .test_shard import run_all
@@ -144,3 +148,95 @@ def test_removed_worker_node_does_not_lose_rows(tmp_path, mesh_source, cache_dir
         assert comparable_rows(out) == reference
     finally:
         cluster.shutdown()
+
+
+def _descendants(root: int) -> set[int]:
+    """``root`` and every process below it, from the parent pids in /proc."""
+    children: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+        except OSError:  # ended meanwhile
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])  # the name in parentheses may hold spaces
+        children.setdefault(ppid, []).append(int(d.name))
+    out, todo = set(), [root]
+    while todo:
+        pid = todo.pop()
+        out.add(pid)
+        todo += children.get(pid, [])
+    return out
+
+
+def _proc_address(hexaddr: str) -> ipaddress._BaseAddress:
+    """An address of /proc/net/tcp{,6}: 32-bit words in host (little-endian) byte order."""
+    raw = bytes.fromhex(hexaddr)
+    return ipaddress.ip_address(b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4)))
+
+
+def listening_sockets(pids: set[int]) -> list[tuple[str, ipaddress._BaseAddress, int]]:
+    """(process name, address, port) of every listening TCP socket (IPv4 and IPv6) that a process
+    of ``pids`` holds: its socket inodes (/proc/PID/fd) looked up in /proc/net/tcp and tcp6."""
+    owner: dict[str, str] = {}
+    for pid in pids:
+        try:
+            name = Path(f"/proc/{pid}/comm").read_text().strip()
+            fds = list(Path(f"/proc/{pid}/fd").iterdir())
+        except OSError:
+            continue
+        for fd in fds:
+            try:
+                link = os.readlink(fd)
+            except OSError:
+                continue
+            if link.startswith("socket:["):
+                owner[link[8:-1]] = name
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[3] == "0A" and f[9] in owner:  # state 0A: LISTEN
+                addr, port = f[1].split(":")
+                out.append((owner[f[9]], _proc_address(addr), int(port, 16)))
+    return out
+
+
+def _is_loopback(addr: ipaddress._BaseAddress) -> bool:
+    mapped = getattr(addr, "ipv4_mapped", None)  # ::ffff:127.0.0.1, a dual-stack socket's loopback
+    return addr.is_loopback or (mapped is not None and mapped.is_loopback)
+
+
+def test_local_cluster_listens_on_loopback_only(tmp_path):
+    import ray
+
+    # the scan sees a socket on every interface, and reads its address and port as the kernel has them
+    with socket.socket() as probe:
+        probe.bind(("0.0.0.0", 0))
+        probe.listen()
+        port = probe.getsockname()[1]
+        assert (_proc_address("00000000"), port) in [(a, p) for _, a, p in listening_sockets({os.getpid()})]
+        assert not _is_loopback(_proc_address("00000000"))
+    assert _is_loopback(_proc_address("0100007F"))  # 127.0.0.1
+    assert _is_loopback(_proc_address("0000000000000000FFFF00000100007F"))  # ::ffff:127.0.0.1
+
+    job = JobDir(tmp_path / "job")
+    private_tmp = start_local_ray(ray, job, 2, log=lambda *a: None)
+    try:
+        @ray.remote
+        def pid():  # two tasks: worker processes with their gRPC servers, as a job's shards have
+            time.sleep(0.5)
+            return os.getpid()
+
+        workers = set(ray.get([pid.remote(), pid.remote()]))
+        ray_procs = _descendants(os.getpid())
+        assert workers <= ray_procs
+        sockets = listening_sockets(ray_procs)
+        names = {n for n, _, _ in sockets}
+        assert {"gcs_server", "raylet"} <= names and len(sockets) >= 5, sockets  # driver, GCS, raylet x2, workers
+        assert [s for s in sockets if not _is_loopback(s[1])] == []
+    finally:
+        ray.shutdown()
+        if private_tmp:
+            shutil.rmtree(private_tmp, ignore_errors=True)
