@@ -165,7 +165,9 @@ def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor) -> tor
         valid = idx >= 0
         keep = valid.nonzero(as_tuple=True)
         rows, pair = b[keep[0]], idx[keep]
-    i, j = hand.self_collision_pairs[pair, 0], hand.self_collision_pairs[pair, 1]
+        i, j = hand.self_collision_pairs[pair, 0], hand.self_collision_pairs[pair, 1]
+        hit = (centres[rows, i] - centres[rows, j]).norm(dim=-1) < radii[i] + radii[j]  # the narrow phase
+        rows, i, j = rows[hit], i[hit], j[hit]  # only overlapping pairs enter the autograd graph
     ov = torch.relu(radii[i] + radii[j] - (centres[rows, i] - centres[rows, j]).norm(dim=-1))
     return out.index_add(0, rows, ov.square())
 
