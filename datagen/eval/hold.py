@@ -121,9 +121,10 @@ def hold(scene: Scene, closed: mujoco.MjData, wrenches: np.ndarray, datas: list[
     worst_t, worst_r = np.zeros(D), np.zeros(D)
     unstable = [False] * D
     settle = cfg.settle_checks > 0
-    last_pos = [closed.xpos[scene.object_body].copy() for _ in range(D)]
-    last_quat = [closed.xquat[scene.object_body].copy() for _ in range(D)]
-    still = [0] * D  # consecutive checks at which direction i's creep, projected, stays within the thresholds
+    if settle:  # the object's pose at the previous check, and for how many checks it has crept slowly
+        last_pos = [closed.xpos[scene.object_body].copy() for _ in range(D)]
+        last_quat = [closed.xquat[scene.object_body].copy() for _ in range(D)]
+        still = [0] * D
 
     def advance(i: int) -> None:
         mujoco.mj_step(m, datas[i], nstep=cfg.check_every)

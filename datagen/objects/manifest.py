@@ -85,6 +85,12 @@ class ManifestEntry:
     scales: tuple
     split: str
 
+    @classmethod
+    def of_ref(cls, ref: ObjectRef, scales: tuple = (), split: str = "train") -> "ManifestEntry":
+        """The entry of ``ref`` with the sha256 of its bytes as they are now (read once here)."""
+        return cls(ref.object_id, ref.source, ref.path, ref.family,
+                   hashlib.sha256(ref.read_bytes()).hexdigest(), tuple(scales), split)
+
     def ref(self) -> ObjectRef:
         """The ObjectRef to read this object (the path is checked against the source root)."""
         return resolve(self.source, self.path, self.id, self.family)
@@ -149,11 +155,9 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
             break
         try:
             resolve(ref.source, ref.path, ref.object_id, ref.family)  # inside the root, before reading
-            sha = hashlib.sha256(ref.read_bytes()).hexdigest()
             # a task object has one scale, its own: its virtual joint's anchor is in metres at it
             sc = (task_objects.build(ref.path).scale_m,) if ref.source == "tasks" else scales
-            e = ManifestEntry(ref.object_id, ref.source, ref.path, ref.family, sha, sc,
-                              split_of(ref.object_id, test_fraction))
+            e = ManifestEntry.of_ref(ref, sc, split_of(ref.object_id, test_fraction))
             out.append(_entry(json.loads(e.to_json()), ref.object_id))  # the loader's own checks
         except ObjectError as exc:
             reject(ref, exc)

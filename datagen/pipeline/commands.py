@@ -17,8 +17,6 @@ def load_object(path: str | Path, cache: str | None = None, process_config: str 
     (processed through the objects cache, in a child process as `datagen prepare` does it: a
     Ctrl-C or a CoACD crash ends only that process) or of a processed-object directory (one holding
     ``meta.json``). Raises FileNotFoundError or ValueError naming the object and the reason."""
-    import hashlib
-
     from datagen.objects import layout
     from datagen.objects.config import ProcessConfig
     from datagen.objects.isolate import process_isolated
@@ -33,9 +31,7 @@ def load_object(path: str | Path, cache: str | None = None, process_config: str 
     elif p.is_file():
         ref = resolve(f"dir:{p.parent.resolve()}", p.name, p.stem)
         cfg = ProcessConfig.from_yaml(process_config) if process_config else ProcessConfig()
-        entry = ManifestEntry(ref.object_id, ref.source, ref.path, ref.family,
-                              hashlib.sha256(ref.read_bytes()).hexdigest(), (), "train")
-        processed = process_isolated(entry, cfg, cache, DEFAULT_TIMEOUT_S,
+        processed = process_isolated(ManifestEntry.of_ref(ref), cfg, cache, DEFAULT_TIMEOUT_S,
                                      remedy="process it first with `datagen prepare --timeout SECONDS`")
     else:
         raise FileNotFoundError(f"object {p} is neither a mesh file nor a processed-object directory")
