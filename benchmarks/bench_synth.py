@@ -4,7 +4,9 @@ Reports wall time, peak memory (RSS high-water mark above the process before syn
 time per iteration broken down by stage (forward + backward of each part, measured separately
 on the same batch), for K = 1e2 and K = 1e4 wrench directions (the paper's hyper-parameter
 table: 14.9 s / 1.5 GB and 83.5 s / 15.3 GB on an RTX 3090). Writes
-``benchmarks/results/synth.md``. Usage: ``make bench-synth`` (``--grasps``, ``--iters``, ``--repeats``).
+``benchmarks/results/synth.md`` (``synth_cuda.md`` with ``--device cuda``, where the peak memory is
+CUDA's allocator high-water mark and ``--batches`` adds a throughput-by-batch-size table). Usage:
+``make bench-synth`` (``--grasps``, ``--iters``, ``--repeats``, ``--device``, ``--batches``).
 """
 
 from __future__ import annotations
@@ -35,18 +37,31 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _object() -> GraspTarget:
+def _object(device: str = "cpu") -> GraspTarget:
     mesh = trimesh.creation.cylinder(radius=0.35, height=1.0, sections=48)
     mesh.apply_scale(1 / np.linalg.norm(0.5 * mesh.extents))
-    return GraspTarget.from_mesh(mesh, 0.08, "cylinder")
+    target = GraspTarget.from_mesh(mesh, 0.08, "cylinder")
+    return target if device == "cpu" else target.to(device)
+
+
+def _sync(device: str):
+    """Waits for queued kernels, so that wall times cover the work (no-op on CPU)."""
+    return torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+
+
+def _peak_mb(device: str) -> float:
+    """Peak memory so far: CUDA's allocator high-water mark on a GPU, the process's RSS on CPU."""
+    return torch.cuda.max_memory_allocated() / 2**20 if device.startswith("cuda") else _rss_mb()
 
 
 def stage_breakdown(hand, target, B: int, K: int) -> dict[str, float]:
     """ms per iteration of each stage, forward + backward, on B initial poses."""
     task = load_task("force_closure")
-    oi = torch.zeros(B, dtype=torch.long)
+    dev = hand.device
+    sync = _sync(str(dev))
+    oi = torch.zeros(B, dtype=torch.long, device=dev)
     root, joints = initial_poses(hand, [target], oi, task.init, torch.Generator().manual_seed(0))
-    dirs = sample_directions(K, generator=torch.Generator().manual_seed(1))
+    dirs = sample_directions(K, generator=torch.Generator().manual_seed(1), device=dev)
     tips_idx = contact_sphere_index(hand)
 
     def fk():
@@ -81,9 +96,19 @@ def stage_breakdown(hand, target, B: int, K: int) -> dict[str, float]:
         n = (-res.normal).clone().requires_grad_(True)
         task_energy(p, n, 0.5, [0, 0, 0, 0, 0, 1], 180.0, dirs).sum().backward()
 
-    return {name: 1e3 * median_time(fn, repeats=7) for name, fn in
+    def timed(fn):
+        return lambda: (fn(), sync())
+
+    return {name: 1e3 * median_time(timed(fn), repeats=7) for name, fn in
             [("FK + spheres", fk), ("penetration (grid SDF)", penetration), ("contacts (grid SDF)", contacts),
              ("self-penetration", self_pen), ("task energy (GWS)", wrench)]}
+
+
+def _run(hand, target, task, cfg, B: int, sync) -> tuple[float, object]:
+    t0 = time.perf_counter()
+    res = synthesize(hand, [target], task, cfg, B)
+    sync()
+    return time.perf_counter() - t0, res
 
 
 def main():
@@ -92,37 +117,46 @@ def main():
     ap.add_argument("--iters", type=int, default=500)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--iters-k1e4", type=int, default=50, help="iterations measured at K = 1e4 (time projected to --iters)")
-    ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--device", default="cpu", help="cpu or cuda")
+    ap.add_argument("--batches", default="", help="comma-separated batch sizes for a throughput table (K = 1e2)")
+    ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
-    hand = load_hand("shadow")
-    target = _object()
+    dev = args.device
+    out = args.out or (RESULTS if dev == "cpu" else RESULTS.with_name(f"synth_{dev.split(':')[0]}.md"))
+    sync = _sync(dev)
+    hand = load_hand("shadow", device=dev)
+    target = _object(dev)
     task = load_task("force_closure")
+    where = ("CPU" if dev == "cpu" else torch.cuda.get_device_name(torch.device(dev)))
+    memory = "the process's RSS high-water mark (all of Python, torch and the hand/object models included)" \
+        if dev == "cpu" else "CUDA's allocator high-water mark (torch.cuda.max_memory_allocated)"
     lines = ["# Grasp synthesis benchmark (Shadow hand, force closure)", "",
              f"Machine: {machine_description()}", "",
-             f"{args.grasps} grasps x {args.iters} iterations on a cylinder (8 cm scale), float32, CPU. "
-             f"Wall time: median of {args.repeats} runs. Peak memory: the process's RSS high-water mark "
-             "(all of Python, torch and the hand/object models included) after each setting.", "",
-             "| K | delta | wall time (s) | per iteration (ms) | peak RSS (MB) | grasps with all tips within 5 mm | max penetration <= 2 mm |",
+             f"{args.grasps} grasps x {args.iters} iterations on a cylinder (8 cm scale), float32, {where}. "
+             f"Wall time: median of {args.repeats} runs{'' if dev == 'cpu' else ' (after one warm-up run)'}. "
+             f"Peak memory: {memory} after each setting.", "",
+             "| K | delta | wall time (s) | per iteration (ms) | peak memory (MB) | grasps with all tips within 5 mm | max penetration <= 2 mm |",
              "|---|---|---|---|---|---|---|"]
-    base_rss = _rss_mb()
+    base_mem = _peak_mb(dev)
+    if dev != "cpu":  # CUDA context, kernels' first compilation and allocator pools: not the method's cost
+        _run(hand, target, task, SynthConfig(iters=5, num_directions=100, seed=0), args.grasps, sync)
     summary = {}
     for K in (100, 10_000):
         iters = args.iters if K == 100 else args.iters_k1e4
         cfg = SynthConfig(iters=iters, num_directions=K, seed=0)
         times, res = [], None
         for r in range(args.repeats if K == 100 else 1):
-            t0 = time.perf_counter()
-            res = synthesize(hand, [target], task, dataclasses.replace(cfg, seed=r), args.grasps)
-            times.append(time.perf_counter() - t0)
+            t, res = _run(hand, target, task, dataclasses.replace(cfg, seed=r), args.grasps, sync)
+            times.append(t)
         wall = statistics.median(times) * args.iters / iters  # projected to args.iters when fewer were run
         contact = (res.tip_distance.abs().amax(-1) <= 0.005).float().mean().item()
         shallow = (res.max_penetration <= 0.002).float().mean().item()
         summary[K] = wall
         note = "" if iters == args.iters else f" (projected from {iters} iterations)"
-        lines.append(f"| {K:.0e} | 15 | {wall:.1f}{note} | {1e3 * wall / args.iters:.0f} | {_rss_mb():.0f} | "
+        lines.append(f"| {K:.0e} | 15 | {wall:.1f}{note} | {1e3 * wall / args.iters:.0f} | {_peak_mb(dev):.0f} | "
                      f"{contact:.0%} | {shallow:.0%} |")
         print(lines[-1], flush=True)
-    lines += ["", f"RSS before synthesis (models loaded): {base_rss:.0f} MB.", "",
+    lines += ["", f"Memory before synthesis (models loaded): {base_mem:.0f} MB.", "",
               f"## Time per iteration by stage (B = {args.grasps}, forward + backward, ms, median of 7)", "",
               "| stage | K = 1e2 | K = 1e4 |", "|---|---|---|"]
     s100 = stage_breakdown(hand, target, args.grasps, 100)
@@ -132,10 +166,21 @@ def main():
     lines.append(f"| sum of stages | {sum(s100.values()):.1f} | {sum(s1e4.values()):.1f} |")
     lines += ["", "The remainder of each iteration (optimizer bookkeeping, couplings, line search) is the "
               "difference between the per-iteration time above and the sum of the stages.", ""]
-    verdict = f"synth: wall_K100={summary[100]:.1f}s wall_K1e4={summary[10_000]:.1f}s peak_rss={_rss_mb():.0f}MB"
+    batches = [int(b) for b in args.batches.split(",") if b.strip()]
+    if batches:
+        lines += [f"## Throughput by batch size (K = 1e2, {args.iters} iterations, one run each)", "",
+                  "| grasps per batch | wall time (s) | grasps per second | peak memory (MB) |", "|---|---|---|---|"]
+        for B in batches:
+            if dev != "cpu":
+                torch.cuda.reset_peak_memory_stats()
+            t, _ = _run(hand, target, task, SynthConfig(iters=args.iters, num_directions=100, seed=0), B, sync)
+            lines.append(f"| {B} | {t:.1f} | {B / t:.1f} | {_peak_mb(dev):.0f} |")
+            print(lines[-1], flush=True)
+        lines.append("")
+    verdict = f"synth: wall_K100={summary[100]:.1f}s wall_K1e4={summary[10_000]:.1f}s peak_mem={_peak_mb(dev):.0f}MB"
     lines += ["```", verdict, "```", ""]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(lines))
     print(verdict)
 
 

@@ -71,8 +71,9 @@ VARIANTS = {  # name -> (label, SynthConfig overrides)
     # once the fingertips touch; by whole-hand epsilon for gamma = 180 (datagen.synth.select)
     "baseline_ms": ("Baseline, 8 seeds", {"weights": {"task": 0.0}, "seeds_per_grasp": 8}),
     "full_ms": ("Ours, 8 seeds", {"seeds_per_grasp": 8}),
+    "full_esel": ("Ours, seeds chosen by energy", {"task_seed_score": False}),
 }
-TABLE_VARIANTS = ("baseline", "baseline_ms", "l2", "nocpn", "full", "full_ms")
+TABLE_VARIANTS = ("baseline", "baseline_ms", "l2", "nocpn", "full", "full_esel", "full_ms")
 
 
 def _rss_mb() -> float:

@@ -68,7 +68,9 @@ class SynthConfig(Config):
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
     seeds_kept: int = 1  #: seeds of each grasp that go on after seed_select_iter; the best of them at the end
+    seed_halving_iter: int = 0  #: 0: off; else at this iteration (< seed_select_iter) the better half of each grasp's seeds go on
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
+    task_seed_score: bool = True  #: seed choice for gamma < 180 with the task energy on: whole-hand task epsilon (False: energy)
     seed: int = 0
 
     def for_task(self, task) -> "SynthConfig":
@@ -94,6 +96,8 @@ class SynthConfig(Config):
     def __post_init__(self):
         if self.sphere_margin_m is not None and not 0 <= self.sphere_margin_m < 0.01:
             raise ConfigError(f"SynthConfig.sphere_margin_m must be in [0, 0.01) m or null, got {self.sphere_margin_m}")
+        if self.seed_halving_iter < 0:
+            raise ConfigError(f"SynthConfig.seed_halving_iter must be >= 0 (0: off), got {self.seed_halving_iter}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1 or self.seeds_kept < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp, seed_select_iter and seeds_kept must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}, {self.seeds_kept}")

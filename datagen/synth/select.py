@@ -8,7 +8,10 @@ hand makes: every link with a collision sphere within ``gap_m`` of the surface c
 deepest sphere's nearest surface point and normal. On the real-object set that epsilon separates
 the grasps that hold in MuJoCo from those that do not better than the fingertips' own epsilon
 (AUC 0.85 vs 0.76 on 224 Shadow grasps; benchmarks/results/quality.md), because phalanges and the
-palm also take load once the hand closes. Other tasks keep the seed with the lowest energy.
+palm also take load once the hand closes. Other tasks (gamma < 180 deg) keep, when the task
+energy is on (``weights.task > 0``), the seed whose whole-hand contacts resist the task best: the
+task epsilon (eq. 3, the smallest GWS radius over the TWS sector) of the same link contacts; with
+the task energy off (the paper's baseline) nothing task-specific is used and the lowest energy wins.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from __future__ import annotations
 import torch
 
 from datagen.synth.energies import _query_targets, hand_object_state
-from datagen.wrench import epsilon_metric
+from datagen.wrench import epsilon_metric, task_epsilon
 
 __all__ = ["best_seeds", "link_contacts", "link_epsilon", "seed_scores", "top_seeds"]
 
@@ -39,9 +42,11 @@ def link_contacts(hand, targets, index: torch.Tensor, root: torch.Tensor, joints
     return closest[rows, pick], -outward[rows, pick], gap_l <= gap_m
 
 
-def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Tensor, mu: float, **kw) -> torch.Tensor:
+def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Tensor, mu: float, *,
+                 task: tuple | None = None, **kw) -> torch.Tensor:
     """(B,) epsilon of each sample's touching contacts (0 with fewer than two); ``kw`` as
-    :func:`datagen.wrench.epsilon_metric`. Samples are batched by their number of contacts."""
+    :func:`datagen.wrench.epsilon_metric`; ``task = (w_t, gamma_deg)``: the task epsilon
+    (:func:`datagen.wrench.task_epsilon`) instead. Samples are batched by their number of contacts."""
     count = touching.sum(-1)
     eps = torch.zeros(points.shape[0], dtype=torch.float64, device=points.device)
     order = torch.argsort((~touching).to(torch.int8), dim=-1, stable=True)  # touching links first
@@ -52,25 +57,29 @@ def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Te
         idx = order[sel, :m]
         p = torch.gather(points[sel], 1, idx[..., None].expand(-1, -1, 3))
         n = torch.gather(normals[sel], 1, idx[..., None].expand(-1, -1, 3))
-        eps[sel] = epsilon_metric(p.double(), n.double(), mu, **kw)
+        eps[sel] = (epsilon_metric(p.double(), n.double(), mu, **kw) if task is None
+                    else task_epsilon(p.double(), n.double(), mu, task[0], task[1], **kw))
     return eps
 
 
 def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
                 energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg) -> torch.Tensor:
-    """``(N,)`` how promising each pose is (higher is better): force closure (gamma 180 deg): the
-    whole-hand epsilon of poses whose task fingertips are in contact, ties (e.g. none in closure)
-    broken by the lower energy; other tasks: minus the energy. ``root (N, 7)``, ``joints (N, J)``
-    coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target."""
+    """``(N,)`` how promising each pose is (higher is better): the whole-hand epsilon of poses whose
+    task fingertips are in contact -- force closure's (gamma 180 deg), or with the task energy on
+    the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by the lower
+    energy; the task energy off and gamma < 180 deg: minus the energy. ``root (N, 7)``,
+    ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target."""
     cfg = cfg.for_hand(hand)
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
-        if task.gamma_deg >= 180 and tip_spheres.numel() > 1:
+        closure = task.gamma_deg >= 180
+        if (closure or (cfg.weights.task > 0 and cfg.task_seed_score)) and tip_spheres.numel() >= (2 if closure else 1):
             tips = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
-            eps = link_epsilon(p, n, touching, cfg.mu, normalize=cfg.normalize).to(energy.dtype)
+            eps = link_epsilon(p, n, touching, cfg.mu, normalize=cfg.normalize,
+                               task=None if closure else (task.w_t, task.gamma_deg)).to(energy.dtype)
             score = score + 1e3 * torch.where(usable, eps, torch.zeros_like(eps))
         return score
 

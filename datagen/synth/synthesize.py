@@ -137,15 +137,17 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     x = PoseVariables(root[:, :3].clone(), root[:, 3:].clone(), joints.clone())
     first, K, run_index = 0, 1, object_index
     if S > 1:  # multi-start: every seed runs the first iterations, the best seeds of each grasp go on
-        first = min(cfg.seed_select_iter, cfg.iters)
-        K = min(cfg.seeds_kept, S)
-        x, e, extras = opt.run(energy_on(seed_index), x, first, callback=callback)
-        keep = top_seeds(seed_scores(hand, targets, seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                                     tip_spheres, task, cfg), S, K)
-        x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
-        root, joints, e = root[keep], joints[keep], e[keep]
-        extras = {k: v[keep] for k, v in extras.items()}
-        run_index = object_index.repeat_interleave(K)
+        select = min(cfg.seed_select_iter, cfg.iters)
+        rounds = [(cfg.seed_halving_iter, S // 2)] if 0 < cfg.seed_halving_iter < select and S >= 4 else []
+        K, run_index = S, seed_index
+        for until, kept in rounds + [(select, min(cfg.seeds_kept, S))]:
+            x, e, extras = opt.run(energy_on(run_index), x, until - first, callback=callback, first_iter=first)
+            keep = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
+                                         tip_spheres, task, cfg), K, kept)
+            x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
+            root, joints, e = root[keep], joints[keep], e[keep]
+            extras = {k: v[keep] for k, v in extras.items()}
+            first, K, run_index = until, kept, object_index.repeat_interleave(kept)
     if cfg.iters > first:
         x, e, extras = opt.run(energy_on(run_index), x, cfg.iters - first, callback=callback, first_iter=first)
     if K > 1:  # the kept seeds ran to the end: the best of them by the same score
@@ -173,7 +175,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
                          normalize=cfg.normalize, contact_model=cfg.contact_model,
-                         torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 else torch.zeros(len(object_index))
+                         torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 \
+        else torch.zeros(len(object_index), dtype=dt, device=dev)
     energies = {k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")}
     return SynthesisResult(
         object_index=object_index,

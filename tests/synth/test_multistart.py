@@ -9,6 +9,7 @@ import trimesh
 
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
+from datagen.synth.config import EnergyWeights
 from datagen.synth.energies import contact_sphere_index
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
@@ -57,6 +58,36 @@ def test_link_epsilon_batches_by_contact_count(hand, box):
         k = touching[b].nonzero().squeeze(-1)
         want = epsilon_metric(p[b, k].double()[None], n[b, k].double()[None], 0.5)[0] if k.numel() >= 2 else 0.0
         assert math.isclose(float(eps[b]), float(want), abs_tol=1e-9)
+
+
+def test_task_seed_score_is_the_whole_hand_task_epsilon(hand, box):
+    """For a task (gamma < 180) with the task energy on, a seed's score is 1e3 x the task epsilon
+    of its touching links' contacts (a per-sample loop over datagen.wrench.task_epsilon, the
+    oracle) when its fingertips touch, plus the clamped energy's tie-break; with the task energy
+    off it is the energy alone."""
+    from datagen.synth.select import seed_scores
+    from datagen.wrench import task_epsilon
+
+    task = load_task("turn_knob3")
+    cfg = SynthConfig(iters=60, seed=2)
+    res = synthesize(hand, [box], task, cfg, 6)
+    index = torch.zeros(6, dtype=torch.long)
+    root, joints = res.grasp[:, :7], res.grasp[:, 7:]
+    energy = torch.linspace(-0.5, 0.5, 6)
+    tips = contact_sphere_index(hand)[[hand.fingertip_names.index(f) for f in task.fingers]]
+    score = seed_scores(hand, [box], index, root, joints, energy, tips, task, cfg)
+    p, n, touching = link_contacts(hand, [box], index, root, joints, cfg.seed_contact_gap_m)
+    usable = res.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
+    positive = 0
+    for b in range(6):
+        k = touching[b].nonzero().squeeze(-1)
+        eps = float(task_epsilon(p[b, k].double()[None], n[b, k].double()[None], cfg.mu, task.w_t,
+                                 task.gamma_deg)[0]) if k.numel() >= 2 and usable[b] else 0.0
+        positive += eps > 0
+        assert math.isclose(float(score[b]), 1e3 * eps - float(energy[b]) / 1e3, rel_tol=1e-4, abs_tol=1e-6)
+    assert positive >= 1  # the case is not vacuous
+    off = SynthConfig(iters=60, seed=2, weights=EnergyWeights(task=0.0))
+    assert torch.allclose(seed_scores(hand, [box], index, root, joints, energy, tips, task, off), -energy / 1e3)
 
 
 def test_link_contacts_are_surface_points_of_touching_links(hand, box):
@@ -148,3 +179,33 @@ def test_kept_seeds_run_to_the_end_and_the_best_is_chosen_there(hand, box):
         assert torch.allclose(res.grasp[b, :3], x.translation[b * K + k], atol=1e-7)
         own = starts[b * S:(b + 1) * S, :3]
         assert (own - res.initial[b, :3]).norm(dim=-1).min() < 1e-6
+
+
+def test_halving_keeps_the_better_half_of_each_grasps_seeds(hand, box):
+    """seed_halving_iter h: S seeds run iterations 0..h-1, then the S/2 of each grasp with the
+    largest score (at iteration h-1, as seed_scores ranks them) run h..select-1, then one goes on.
+    Captured through the optimizer callback: the batch sizes per iteration, and at iteration h the
+    survivors are exactly the top half of each grasp's seeds by score."""
+    from datagen.synth.select import seed_scores
+
+    task = load_task("force_closure")
+    S, B, h, sel, iters = 4, 3, 6, 12, 16
+    cfg = SynthConfig(iters=iters, seed=4, seeds_per_grasp=S, seed_select_iter=sel, seed_halving_iter=h)
+    sizes, at = {}, {}
+
+    def capture(it, x, e, ok):
+        sizes[it] = x.translation.shape[0]
+        if it in (h - 1, h):
+            at[it] = (x.translation.clone(), x.joints.clone(), x.root_pose().clone(), e.clone())
+
+    synthesize(hand, [box], task, cfg, B, callback=capture)
+    assert [sizes[i] for i in range(iters)] == [B * S] * h + [B * S // 2] * (sel - h) + [B] * (iters - sel)
+    t, j, root, e = at[h - 1]
+    score = seed_scores(hand, [box], torch.zeros(B * S, dtype=torch.long), root, hand.apply_couplings(j), e,
+                        contact_sphere_index(hand), task, cfg).reshape(B, S)
+    # the poses entering iteration h are the kept ones, moved by one step: match each to its seed
+    t_next = at[h][0].reshape(B, S // 2, 3)
+    for b in range(B):
+        want = set(score[b].topk(S // 2).indices.tolist())
+        got = {int((t[b * S:(b + 1) * S] - p).norm(dim=-1).argmin()) for p in t_next[b]}
+        assert got == want, f"grasp {b}: kept seeds {got}, best by score {want}"
