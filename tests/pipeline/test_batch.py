@@ -123,9 +123,9 @@ def test_a_tasks_synth_block_lies_under_the_run_config():
     from datagen.tasks import load_task
 
     plate = load_task("lift_plate")
-    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 8}
+    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 16}
     merged = SynthConfig().for_task(plate)
-    assert merged.exact_contacts is True and merged.seeds_per_grasp == 8 and merged.iters == SynthConfig().iters
+    assert merged.exact_contacts is True and merged.seeds_per_grasp == 16 and merged.iters == SynthConfig().iters
     mine = SynthConfig(seeds_per_grasp=2, iters=40, weights=EnergyWeights(task=0.0)).for_task(plate)
     assert (mine.seeds_per_grasp, mine.iters, mine.exact_contacts) == (2, 40, True)
     assert mine.weights.task == 0.0 and mine.weights.distance == EnergyWeights().distance
