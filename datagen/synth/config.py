@@ -68,9 +68,9 @@ class SynthConfig(Config):
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
     seeds_kept: int = 1  #: seeds of each grasp that go on after seed_select_iter; the best of them at the end
-    seed_halving_iter: int = 0  #: 0: off; else at this iteration (< seed_select_iter) the better half of each grasp's seeds go on
+    seed_halving_iter: int = 0  #: 0: off; else at this iteration (< seed_select_iter) each grasp's better half goes on
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
-    task_seed_score: bool = True  #: seed choice for gamma < 180 with the task energy on: whole-hand task epsilon (False: energy)
+    task_seed_score: bool = True  #: gamma < 180, task energy on: seed choice by whole-hand task epsilon, else energy
     seed: int = 0
 
     def for_task(self, task) -> "SynthConfig":

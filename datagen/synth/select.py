@@ -73,7 +73,8 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         closure = task.gamma_deg >= 180
-        if (closure or (cfg.weights.task > 0 and cfg.task_seed_score)) and tip_spheres.numel() >= (2 if closure else 1):
+        by_epsilon = closure or (cfg.weights.task > 0 and cfg.task_seed_score)
+        if by_epsilon and tip_spheres.numel() >= (2 if closure else 1):
             tips = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
