@@ -7,6 +7,10 @@ table: 14.9 s / 1.5 GB and 83.5 s / 15.3 GB on an RTX 3090). Writes
 ``benchmarks/results/synth.md`` (``synth_cuda.md`` with ``--device cuda``, where the peak memory is
 CUDA's allocator high-water mark and ``--batches`` adds a throughput-by-batch-size table). Usage:
 ``make bench-synth`` (``--grasps``, ``--iters``, ``--repeats``, ``--device``, ``--batches``).
+
+``--hands shadow,leap,...`` adds the per-hand cost of the job's default synthesis (16 seeds,
+300 iterations, 8 grasps on the cylinder) with the self-collision pair lists reused across
+iterations (the default) and rebuilt every iteration, and each hand's cost against Shadow's.
 """
 
 from __future__ import annotations
@@ -111,6 +115,58 @@ def _run(hand, target, task, cfg, B: int, sync) -> tuple[float, object]:
     return time.perf_counter() - t0, res
 
 
+def per_hand_table(hands: list[str], target, task, dev: str, sync, repeats: int) -> list[str]:
+    """Markdown lines: seconds per grasp of the job's default synthesis for each hand, with the
+    self-collision pair lists reused (default) and rebuilt every iteration, alternating runs."""
+    from workers.job import FORCE_CLOSURE_SEEDS
+
+    B, iters = 8, 300
+    lines = [f"## Per-hand cost, job defaults ({FORCE_CLOSURE_SEEDS} seeds, {iters} iterations, {B} grasps, "
+             f"K = 1e2; median of {repeats} runs, settings alternating)", "",
+             "| hand | spheres | self-collision pairs | s per grasp | s per grasp, pair lists rebuilt every iteration | "
+             "x Shadow | poses whose pair list was rebuilt, per evaluated pose |", "|---|---|---|---|---|---|---|"]
+    per_grasp = {}
+    for name in hands:
+        hand = load_hand(name, device=dev)
+        base = SynthConfig(iters=iters, seeds_per_grasp=FORCE_CLOSURE_SEEDS, seed=0)
+        _run(hand, target, task, dataclasses.replace(base, iters=3), B, sync)  # warm-up
+        times = {0.0: [], base.self_pair_skin_m: []}
+        for r in range(repeats):
+            for skin in times:
+                times[skin].append(_run(hand, target, task, dataclasses.replace(base, seed=r, self_pair_skin_m=skin), B, sync)[0])
+        counts = _rebuild_fraction(hand, target, task, base, B)
+        t_list, t_fresh = (statistics.median(times[k]) / B for k in (base.self_pair_skin_m, 0.0))
+        per_grasp[name] = t_list
+        ratio = f"{t_list / per_grasp['shadow']:.2f}" if "shadow" in per_grasp else "-"
+        lines.append(f"| {name} | {hand.num_spheres} | {hand.self_collision_pairs.shape[0]} | {t_list:.2f} | "
+                     f"{t_fresh:.2f} | {ratio} | {counts:.3f} |")
+        print(lines[-1], flush=True)
+    return lines + ["", "Both settings give bit-identical poses (the same pairs are summed in the same order); "
+                    "`tests/synth/test_self_collision.py` checks it.", ""]
+
+
+def _rebuild_fraction(hand, target, task, cfg, B: int) -> float:
+    """Fraction of evaluated poses whose self-collision pair list had to be made anew."""
+    from datagen.synth import self_collision
+
+    made, calls = [], []
+    real = self_collision.SelfPairList.candidates
+
+    def counting(self, centres, radii, frame):
+        before = self.rebuilt
+        out = real(self, centres, radii, frame)
+        made.append(self.rebuilt - before)
+        calls.append(centres.shape[0])
+        return out
+
+    self_collision.SelfPairList.candidates = counting
+    try:
+        synthesize(hand, [target], task, cfg, B)
+    finally:
+        self_collision.SelfPairList.candidates = real
+    return sum(made) / max(1, sum(calls))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grasps", type=int, default=100)
@@ -119,6 +175,7 @@ def main():
     ap.add_argument("--iters-k1e4", type=int, default=50, help="iterations measured at K = 1e4 (time projected to --iters)")
     ap.add_argument("--device", default="cpu", help="cpu or cuda")
     ap.add_argument("--batches", default="", help="comma-separated batch sizes for a throughput table (K = 1e2)")
+    ap.add_argument("--hands", default="", help="comma-separated hands for the per-hand cost table (job defaults)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     dev = args.device
@@ -177,6 +234,9 @@ def main():
             lines.append(f"| {B} | {t:.1f} | {B / t:.1f} | {_peak_mb(dev):.0f} |")
             print(lines[-1], flush=True)
         lines.append("")
+    hands = [h for h in args.hands.split(",") if h.strip()]
+    if hands:
+        lines += per_hand_table(hands, target, task, dev, sync, args.repeats)
     verdict = f"synth: wall_K100={summary[100]:.1f}s wall_K1e4={summary[10_000]:.1f}s peak_mem={_peak_mb(dev):.0f}MB"
     lines += ["```", verdict, "```", ""]
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -70,6 +70,7 @@ class SynthConfig(Config):
     seeds_kept: int = 1  #: seeds of each grasp that go on after seed_select_iter; the best of them at the end
     seed_halving_iter: int = 0  #: 0: off; else at this iteration (< seed_select_iter) each grasp's better half goes on
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
+    self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_seed_score: bool = True  #: gamma < 180, task energy on: seed choice by whole-hand task epsilon, else energy
     seed: int = 0
 
@@ -96,6 +97,8 @@ class SynthConfig(Config):
     def __post_init__(self):
         if self.sphere_margin_m is not None and not 0 <= self.sphere_margin_m < 0.01:
             raise ConfigError(f"SynthConfig.sphere_margin_m must be in [0, 0.01) m or null, got {self.sphere_margin_m}")
+        if not (math.isfinite(self.self_pair_skin_m) and self.self_pair_skin_m >= 0):
+            raise ConfigError(f"SynthConfig.self_pair_skin_m must be a finite number >= 0 m, got {self.self_pair_skin_m}")
         if self.seed_halving_iter < 0:
             raise ConfigError(f"SynthConfig.seed_halving_iter must be >= 0 (0: off), got {self.seed_halving_iter}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1 or self.seeds_kept < 1:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import torch
 
+from datagen.synth.self_collision import SelfPairList, self_overlap_energy
 from datagen.wrench import task_energy
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
@@ -92,86 +93,6 @@ def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) ->
     return dist
 
 
-def _sphere_clusters(link: torch.Tensor, local: torch.Tensor, size: int) -> torch.Tensor:
-    """(S,) cluster id of each sphere: a link's spheres split into ``ceil(n / size)`` clusters
-    around farthest-point seeds of their local centres (deterministic); ids are dense, per link."""
-    out = torch.empty_like(link)
-    nxt = 0
-    for li in torch.unique(link).tolist():
-        idx = (link == li).nonzero().squeeze(-1)
-        c = local[idx]
-        k = max(1, -(-idx.numel() // size))
-        seeds = [0]
-        d = (c - c[0]).norm(dim=-1)
-        while len(seeds) < k:
-            seeds.append(int(d.argmax()))
-            d = torch.minimum(d, (c - c[seeds[-1]]).norm(dim=-1))
-        out[idx] = nxt + torch.cdist(c, c[seeds]).argmin(-1)
-        nxt += k
-    return out
-
-
-def _link_bounds(hand, cluster_size: int = 4):
-    """Broad phase of the self-collision pairs, computed once per hand and kept on it.
-
-    Each link's spheres are split into clusters of about ``cluster_size`` neighbouring spheres
-    (4: LEAP 19.2 -> 1.9 ms per grasp-iteration, 8: 2.3, 16: 3.3, whole links: 19.2).
-    Returns ``(groups (G, 2) cluster ids, members (G, M) sphere-pair indices of each group padded
-    with -1, cluster_radius (C,) m, sphere_cluster (S,), cluster_count (C,))``: a group is a
-    cluster pair that has sphere pairs; a cluster's bounding sphere is centred at the mean of its
-    sphere centres (a rigid motion of the link keeps that point the mean) with the radius
-    enclosing every sphere of the cluster."""
-    cached = getattr(hand, "_self_pair_bounds", None)
-    if cached is not None and cached[1].device == hand.self_collision_pairs.device:
-        return cached
-    local = hand.sphere_centres_local
-    link = _sphere_clusters(hand.sphere_link_index.cpu(), local.cpu(), cluster_size).to(local.device)
-    L = int(link.max()) + 1 if link.numel() else 1
-    count = torch.bincount(link, minlength=L).clamp_min(1)
-    mean = torch.zeros(L, 3, dtype=local.dtype, device=local.device).index_add_(0, link, local) / count[:, None]
-    reach = (local - mean[link]).norm(dim=-1) + hand.sphere_radii
-    radius = torch.zeros(L, dtype=local.dtype, device=local.device).scatter_reduce_(0, link, reach, "amax")
-    pairs = hand.self_collision_pairs
-    key = link[pairs[:, 0]] * L + link[pairs[:, 1]]
-    uniq, group = torch.unique(key, return_inverse=True)
-    order = torch.argsort(group, stable=True)
-    sizes = torch.bincount(group, minlength=uniq.numel())
-    starts = torch.cumsum(sizes, 0) - sizes
-    slot = torch.arange(pairs.shape[0], device=pairs.device) - starts[group[order]]
-    members = torch.full((uniq.numel(), int(sizes.max())), -1, dtype=torch.long, device=pairs.device)
-    members[group[order], slot] = order
-    out = (torch.stack([uniq // L, uniq % L], -1), members, radius, link, count)
-    hand._self_pair_bounds = out
-    return out
-
-
-def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor) -> torch.Tensor:
-    """(B,) summed squared overlap (m^2) of the self-collision sphere pairs, from already posed
-    spheres ``(B, S, 3)``. A pair is evaluated only in the poses where the bounding spheres of its
-    two sphere clusters (about 4 neighbouring spheres of one link each) overlap (elsewhere its
-    overlap is 0), so the sum equals the all-pairs sum exactly; LEAP's 280k sphere pairs made the
-    all-pairs term 30x the cost of the rest of an iteration, and whole-link bounds ~17x."""
-    B = centres.shape[0]
-    out = centres.new_zeros(B)
-    if hand.self_collision_pairs.shape[0] == 0:
-        return out
-    groups, members, link_radius, link, count = _link_bounds(hand)
-    with torch.no_grad():
-        centre = torch.zeros(B, link_radius.shape[0], 3, dtype=centres.dtype, device=centres.device)
-        centre = centre.index_add_(1, link, centres.detach()) / count[:, None].to(centres.dtype)
-        gap = (centre[:, groups[:, 0]] - centre[:, groups[:, 1]]).norm(dim=-1) - link_radius[groups].sum(-1)
-        b, g = (gap < 0).nonzero(as_tuple=True)  # (n,) poses and link pairs whose bounds overlap
-        idx = members[g]  # (n, M)
-        valid = idx >= 0
-        keep = valid.nonzero(as_tuple=True)
-        rows, pair = b[keep[0]], idx[keep]
-        i, j = hand.self_collision_pairs[pair, 0], hand.self_collision_pairs[pair, 1]
-        hit = (centres[rows, i] - centres[rows, j]).norm(dim=-1) < radii[i] + radii[j]  # the narrow phase
-        rows, i, j = rows[hit], i[hit], j[hit]  # only overlapping pairs enter the autograd graph
-    ov = torch.relu(radii[i] + radii[j] - (centres[rows, i] - centres[rows, j]).norm(dim=-1))
-    return out.index_add(0, rows, ov.square())
-
-
 def contact_sphere_index(hand) -> torch.Tensor:
     """(F,) index of each fingertip's contact sphere: its link's sphere nearest the pad point."""
     out = []
@@ -186,13 +107,14 @@ def contact_sphere_index(hand) -> torch.Tensor:
 
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
-                      self_collision: bool = True) -> HandObjectState:
+                      self_collision: bool = True, self_pairs: SelfPairList | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
     picks the exact mesh SDF (default) or the SDF grid for the contacts. ``sphere_margin`` (m) is
     how far collision spheres may sink into the object before they count as penetrating.
-    ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0.
+    ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0;
+    ``self_pairs`` reuses its pair lists across calls on the same batch (an optimizer run).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -207,7 +129,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     return HandObjectState(
         tips=tips, tip_distance=d_tip, contact_points=closest, contact_normals=-outward,
         sphere_penetration=(pen * pen).sum(-1), max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
-        self_penetration=(self_overlap_energy(hand, centres_all, radii_all) if self_collision
+        self_penetration=(self_overlap_energy(hand, centres_all, radii_all, self_pairs, T[:, hand.palm_link])
+                          if self_collision
                           else centres_all.new_zeros(centres_all.shape[0])),
         joint_violation=violation,
     )

@@ -27,6 +27,7 @@ from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_ob
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
 from datagen.synth.select import link_contacts, seed_scores, top_seeds
+from datagen.synth.self_collision import SelfPairList
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
 from datagen.wrench import epsilon_metric, sample_directions
 
@@ -119,12 +120,14 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     joints = hand.apply_couplings(joints)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
 
-    def energy_on(index):
+    def energy_on(index):  # one optimizer run on one batch (its own self-collision pair lists)
+        self_pairs = SelfPairList(hand, cfg.self_pair_skin_m) if cfg.self_pair_skin_m > 0 else None
+
         def energy_fn(t, q, j):
             jj = hand.apply_couplings(j)
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
-                                      self_collision=cfg.weights.self_penetration > 0)
+                                      self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs)
             terms = evaluate_state(state, cfg, task, directions)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())

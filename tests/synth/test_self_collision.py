@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from datagen.hands import load_hand
-from datagen.synth.energies import self_overlap_energy
+from datagen.synth.self_collision import self_overlap_energy
 
 
 @pytest.mark.parametrize("name", ["shadow", "allegro", "leap"])
@@ -30,3 +30,77 @@ def test_self_overlap_energy_equals_the_all_pairs_sum(name):
     assert (brute > 0).any()
     assert torch.allclose(fast, brute, rtol=1e-12, atol=1e-15)
     assert torch.allclose(g_fast, g_brute, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["allegro", "leap"])
+def test_reused_pair_lists_equal_the_all_pairs_sum_along_a_walk(name):
+    """Pair lists kept across calls (SelfPairList) against the all-pairs sum (the oracle) along a
+    random walk of the joints and the root with steps of 0.1 to 8 mm-scale: small steps reuse the
+    lists, large ones force new lists for some poses; the value must equal the oracle at every call
+    and equal the list-free energy bit for bit (same pairs, same order)."""
+    from datagen.synth.self_collision import SelfPairList
+
+    try:
+        hand = load_hand(name)
+    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+        pytest.skip(f"hand {name} not available: {exc}")
+    g = torch.Generator().manual_seed(1)
+    B = 6
+    lo, hi = hand.joint_lower, hand.joint_upper
+    joints = lo + (hi - lo) * (0.3 + 0.4 * torch.rand(B, hand.num_joints, generator=g))
+    root = torch.tensor([0.01, -0.02, 0.03, 1.0, 0, 0, 0]).repeat(B, 1)
+    pairs = SelfPairList(hand, skin_m=0.004)
+    i, j = hand.self_collision_pairs[:, 0], hand.self_collision_pairs[:, 1]
+    for step in [0.001, 0.002, 0.0, 0.05, 0.001, 0.001, 0.08, 0.0005, 0.0005, 0.002]:
+        joints = hand.apply_couplings((joints + step * torch.randn(joints.shape, generator=g)).clamp(lo, hi))
+        root = root.clone()
+        root[:, :3] += 0.01 * torch.randn(B, 3, generator=g)  # moving the whole hand never invalidates a list
+        T = hand.link_transforms(root, joints)
+        c, r = hand.spheres(root, joints, transforms=T)
+        listed = self_overlap_energy(hand, c, r, pairs, T[:, hand.palm_link])
+        fresh = self_overlap_energy(hand, c, r)
+        brute = torch.relu(r[i] + r[j] - (c[:, i] - c[:, j]).norm(dim=-1)).square().sum(-1)
+        assert torch.equal(listed, fresh)
+        assert torch.allclose(listed, brute, rtol=1e-5, atol=1e-12)
+    assert (brute > 0).any()
+    assert 0 < pairs.rebuilt < 10 * B  # some calls reused lists, the large steps made new ones
+
+
+def test_pair_list_starts_afresh_for_another_batch():
+    from datagen.synth.self_collision import SelfPairList
+
+    hand = load_hand("shadow")
+    pairs = SelfPairList(hand)
+    for B in (4, 2):
+        joints = hand.apply_couplings(hand.joint_lower + 0.8 * (hand.joint_upper - hand.joint_lower)).expand(B, -1)
+        root = torch.tensor([0, 0, 0, 1.0, 0, 0, 0]).expand(B, 7)
+        T = hand.link_transforms(root, joints)
+        c, r = hand.spheres(root, joints, transforms=T)
+        assert torch.equal(self_overlap_energy(hand, c, r, pairs, T[:, hand.palm_link]), self_overlap_energy(hand, c, r))
+    assert pairs.rebuilt == 6
+    with pytest.raises(ValueError, match="skin_m"):
+        SelfPairList(hand, skin_m=0.0)
+
+
+def test_synthesis_is_the_same_with_and_without_reused_pair_lists():
+    """The pair lists only skip work: a whole multi-start synthesis gives identical tensors."""
+    import dataclasses
+
+    import numpy as np
+    import trimesh
+
+    from datagen.synth import GraspTarget, SynthConfig, synthesize
+    from datagen.tasks import load_task
+
+    try:
+        hand = load_hand("allegro")
+    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+        pytest.skip(f"hand allegro not available: {exc}")
+    mesh = trimesh.creation.box(extents=(0.6, 0.8, 1.0))
+    mesh.apply_scale(1 / np.linalg.norm(0.5 * mesh.extents))
+    target = GraspTarget.from_mesh(mesh, 0.07, "box")
+    cfg = SynthConfig(iters=40, seeds_per_grasp=2, seed_select_iter=20, seed=2)
+    a = synthesize(hand, [target], load_task("force_closure"), cfg, 2)
+    b = synthesize(hand, [target], load_task("force_closure"), dataclasses.replace(cfg, self_pair_skin_m=0.0), 2)
+    assert torch.equal(a.grasp, b.grasp) and torch.equal(a.squeeze, b.squeeze)
+    assert a.energies["self_penetration"].sum() >= 0
