@@ -41,8 +41,8 @@ examples: $(STAMP)
 bench-gws: $(STAMP)
 	$(PY) -m benchmarks.bench_gws
 
-bench-synth: $(STAMP)
-	$(PY) -m benchmarks.bench_synth
+bench-synth: $(STAMP) hands
+	$(PY) -m benchmarks.bench_synth --hands shadow,leap,allegro,shadow_e3m5
 
 .PHONY: bench-squeeze
 bench-squeeze: $(STAMP)

@@ -33,6 +33,7 @@ from datagen.tasks import load_task
 from datagen.synth.energies import contact_sphere_index
 from datagen.synth.init import initial_poses
 from datagen.wrench import sample_directions, task_energy
+from workers.job import code_version
 
 RESULTS = Path(__file__).parent / "results" / "synth.md"
 
@@ -127,7 +128,11 @@ def per_hand_table(hands: list[str], target, task, dev: str, sync, repeats: int)
              "x Shadow | poses whose pair list was rebuilt, per evaluated pose |", "|---|---|---|---|---|---|---|"]
     per_grasp = {}
     for name in hands:
-        hand = load_hand(name, device=dev)
+        try:
+            hand = load_hand(name, device=dev)
+        except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+            lines.append(f"| {name} | not available: {exc} | | | | | |")
+            continue
         base = SynthConfig(iters=iters, seeds_per_grasp=FORCE_CLOSURE_SEEDS, seed=0)
         _run(hand, target, task, dataclasses.replace(base, iters=3), B, sync)  # warm-up
         times = {0.0: [], base.self_pair_skin_m: []}
@@ -188,7 +193,7 @@ def main():
     memory = "the process's RSS high-water mark (all of Python, torch and the hand/object models included)" \
         if dev == "cpu" else "CUDA's allocator high-water mark (torch.cuda.max_memory_allocated)"
     lines = ["# Grasp synthesis benchmark (Shadow hand, force closure)", "",
-             f"Machine: {machine_description()}", "",
+             f"Machine: {machine_description()}", "", f"Commit {code_version()}.", "",
              f"{args.grasps} grasps x {args.iters} iterations on a cylinder (8 cm scale), float32, {where}. "
              f"Wall time: median of {args.repeats} runs{'' if dev == 'cpu' else ' (after one warm-up run)'}. "
              f"Peak memory: {memory} after each setting.", "",
