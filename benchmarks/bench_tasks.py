@@ -478,7 +478,7 @@ def main():
     ap.add_argument("--iters", type=int, default=500)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--inits", default=",".join(INITS), help="initialisation regimes: task, generic")
-    ap.add_argument("--no-self-penetration", default="leap", help="hands run with self-penetration weight 0")
+    ap.add_argument("--no-self-penetration", default="", help="hands run with self-penetration weight 0 (LEAP did, until its self-collision got cheaper at da500f9)")
     ap.add_argument("--records", type=Path, default=RECORDS)
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--force", action="store_true", help="redo existing records")
