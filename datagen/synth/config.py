@@ -64,6 +64,7 @@ class SynthConfig(Config):
     squeeze_rad: float = 0.1  #: "joint": pregrasp opens each joint by up to this towards the open pose
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
     sphere_margin_m: float | None = None  #: m collision spheres may sink into the object (None: the hand spec's, see for_hand)
+    touch_real_gaps: bool = False  #: after optimizing, move each task fingertip in by its real (not sphere) gap (touch.py)
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept

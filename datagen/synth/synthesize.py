@@ -29,6 +29,7 @@ from datagen.synth.optimizer import GroupedDescent, PoseVariables
 from datagen.synth.select import link_contacts, seed_scores, top_seeds
 from datagen.synth.self_collision import SelfPairList
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
+from datagen.synth.touch import touch_grasp
 from datagen.wrench import epsilon_metric, sample_directions
 
 __all__ = ["SynthesisResult", "finger_joint_groups", "finger_joint_mask", "synthesize"]
@@ -166,6 +167,12 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         root_f = x.root_pose()
         state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m)
+        if cfg.touch_real_gaps:  # the real fingertips onto the surface together (touch.py)
+            tip_index = torch.as_tensor(finger_index, dtype=torch.long, device=dev)
+            grasp_j, _ = touch_grasp(hand, targets, object_index, root_f, grasp_j, tip_index, tip_spheres,
+                                     state.contact_normals, finger_joint_mask(hand))
+            state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
+                                      sphere_margin=cfg.sphere_margin_m)
         links = (link_contacts(hand, targets, object_index, root_f, grasp_j, cfg.seed_contact_gap_m)
                  if cfg.squeeze_mode == "hand" else None)
         pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
