@@ -23,7 +23,18 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["SelfPairList", "candidate_pairs", "self_overlap_energy"]
+__all__ = ["SelfPairList", "candidate_pairs", "farthest_point_seeds", "self_overlap_energy"]
+
+
+def farthest_point_seeds(points: torch.Tensor, k: int) -> list[int]:
+    """Indices of ``min(k, N)`` of ``points (N, 3)`` spread by farthest-point sampling from point 0
+    (deterministic)."""
+    seeds = [0]
+    d = (points - points[0]).norm(dim=-1)
+    while len(seeds) < min(k, points.shape[0]):
+        seeds.append(int(d.argmax()))
+        d = torch.minimum(d, (points - points[seeds[-1]]).norm(dim=-1))
+    return seeds
 
 
 def _sphere_clusters(link: torch.Tensor, local: torch.Tensor, size: int) -> torch.Tensor:
@@ -35,11 +46,7 @@ def _sphere_clusters(link: torch.Tensor, local: torch.Tensor, size: int) -> torc
         idx = (link == li).nonzero().squeeze(-1)
         c = local[idx]
         k = max(1, -(-idx.numel() // size))
-        seeds = [0]
-        d = (c - c[0]).norm(dim=-1)
-        while len(seeds) < k:
-            seeds.append(int(d.argmax()))
-            d = torch.minimum(d, (c - c[seeds[-1]]).norm(dim=-1))
+        seeds = farthest_point_seeds(c, k)
         out[idx] = nxt + torch.cdist(c, c[seeds]).argmin(-1)
         nxt += k
     return out

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from datagen.hands.geometry import link_shapes, sample_link_surface
+from datagen.synth.self_collision import farthest_point_seeds
 
 __all__ = ["TIP_SURFACE_POINTS", "real_tip_gaps", "tip_surface_points", "touch_grasp"]
 
@@ -37,12 +38,7 @@ def tip_surface_points(hand) -> torch.Tensor:
         if not shapes:
             raise ValueError(f"hand {hand.name!r}: fingertip {hand.fingertip_names[f]!r} link has no collision geometry")
         pts, _ = sample_link_surface(shapes, 20000, np.random.default_rng(0))
-        idx = [0]
-        d = np.linalg.norm(pts - pts[0], axis=1)
-        while len(idx) < min(TIP_SURFACE_POINTS, len(pts)):
-            idx.append(int(d.argmax()))
-            d = np.minimum(d, np.linalg.norm(pts - pts[idx[-1]], axis=1))
-        out.append(pts[idx])
+        out.append(pts[farthest_point_seeds(torch.as_tensor(pts), TIP_SURFACE_POINTS)])
     hand._tip_surface_points = torch.as_tensor(np.stack(out), dtype=hand.sphere_radii.dtype,
                                                device=hand.sphere_radii.device)
     return hand._tip_surface_points
