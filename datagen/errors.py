@@ -26,6 +26,18 @@ class DatagenError(Exception):
         self.remedy = remedy
         super().__init__(message + (f" ({remedy})" if remedy else ""))
 
+    def __reduce__(self):
+        # rebuilt from its message and attributes, not by calling __init__ again (whose signature
+        # differs per subclass): it crosses process boundaries intact (Ray tasks, process pools)
+        return _rebuild, (type(self), self.args, dict(self.__dict__))
+
+
+def _rebuild(cls: type, args: tuple, state: dict) -> "DatagenError":
+    exc = cls.__new__(cls, *args)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
+
 
 class ConfigError(DatagenError, ValueError):
     """A malformed config or task spec; the message names the file/field and the fix."""

@@ -90,3 +90,25 @@ def test_hash_is_stable_across_processes_and_follows_the_content():
     d = c.to_dict()
     assert stable_hash(dict(reversed(list(d.items())))) == c.hash()
     assert stable_hash(json.loads(json.dumps(d))) == c.hash()
+
+
+def test_every_datagen_error_survives_pickling():
+    """Errors cross process boundaries (Ray tasks, evaluation pools): each subclass, whatever its
+    constructor's signature, comes back with its type, message and attributes (an EvalError
+    that could not be unpickled once hung a process pool's result thread)."""
+    import pickle
+
+    from datagen.errors import ConfigError, EvalError
+    from datagen.hands.spec import HandSpecError
+    from datagen.objects.errors import MeshProcessingError, Reason
+    from workers.job import JobConfigError
+
+    made = [EvalError("object 'a'", "cannot read it", "run datagen prepare"),
+            ConfigError.make("SynthConfig.iters", "must be > 0"),
+            JobConfigError.make("JobConfig.count", "must be >= 1"),
+            HandSpecError("spec.yaml", "malformed", "fix it"),
+            MeshProcessingError(Reason.COACD_FAILED, "mesh.obj", "CoACD raised"),
+            ]
+    for exc in made:
+        back = pickle.loads(pickle.dumps(exc))
+        assert type(back) is type(exc) and str(back) == str(exc) and back.__dict__ == exc.__dict__, exc

@@ -100,10 +100,11 @@ class JobConfig(Config):
     object_timeout_s: float = 300.0     #: per-object processing limit (isolated process); not hashed
     process: dict[str, Any] = field(default_factory=lambda: dict(FAST_PROCESS))  #: ProcessConfig fields
     synth: dict[str, Any] = field(default_factory=lambda: {"iters": 300, "seeds_per_grasp": FORCE_CLOSURE_SEEDS})
-    #: SynthConfig fields (multi-start: the best of 8 starts per grasp; benchmarks/results/quality.md)
+    #: SynthConfig fields (multi-start: the best of 16 starts per grasp; benchmarks/results/quality.md)
     eval: dict[str, Any] = field(default_factory=dict)  #: EvalConfig fields
-    cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads
-                                        #: (not hashed: keep it fixed within a job for identical floats)
+    cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads and
+                                        #: its evaluation processes (not hashed: keep it fixed within a
+                                        #: job for identical floats)
     gpus_per_shard: float = 1.0         #: used only when the cluster has GPUs
 
     def __post_init__(self):

@@ -165,7 +165,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
 
     batch = run_batch(ready, hand, cfg.tasks, scfg, ecfg, grasps_per_object=cfg.grasps_per_object,
                       seed=shard_seed(cfg, index), grid_resolution=cfg.grid_resolution, cache=cache, base=job.path,
-                      device=device, progress=moved)
+                      device=device, progress=moved, eval_workers=max(1, int(cfg.cpus_per_shard)))
     for f in batch.failures:
         fails.append({**f, "shard": index})
     timings.update(batch.timings)

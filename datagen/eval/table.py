@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing as mp
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +121,7 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspRes
 
     from datagen.hands import load_hand
 
+    threads = torch.get_num_threads()
     torch.set_num_threads(1)  # one core per worker; the epsilon search is small
     cfg = EvalConfig.from_dict(cfg_dict)
     evaluators: dict[str, Evaluator] = {}
@@ -134,7 +136,21 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspRes
     finally:
         for ev in evaluators.values():
             ev.close()
+        torch.set_num_threads(threads)  # in the caller's process: its synthesis keeps its threads
     return out
+
+
+def _evaluate_rows_pooled(rows: list[dict], base: str, cfg_dict: dict):
+    """`_evaluate_rows` in a pool worker: an error comes back as a value the parent re-raises. An
+    exception that cannot be unpickled would otherwise stop the pool's result thread and leave the
+    caller waiting forever."""
+    try:
+        return _evaluate_rows(rows, base, cfg_dict)
+    except Exception as exc:  # noqa: BLE001 - re-raised by the parent
+        try:
+            return pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001
+            return RuntimeError(f"{type(exc).__name__}: {exc}")
 
 
 def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1) -> pa.Table:
@@ -152,9 +168,12 @@ def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", 
         with sigint_blocked():
             pool = mp.Pool(n, initializer=on_sigint, initargs=("ignore",))
         with pool:
-            parts = pool.starmap(_evaluate_rows, [(rows[a:b], str(base), cfg_d)
-                                                  for a, b in zip(bounds[:-1], bounds[1:])])
-            results = [r for part in parts for r in part]
+            parts = pool.starmap(_evaluate_rows_pooled, [(rows[a:b], str(base), cfg_d)
+                                                         for a, b in zip(bounds[:-1], bounds[1:])])
+        for part in parts:
+            if isinstance(part, BaseException):
+                raise part
+        results = [r for part in parts for r in part]
     return append_results(table, results)
 
 

@@ -4,6 +4,8 @@ CoACD is native code: on a bad mesh it can run for hours or crash the interprete
 object in a child process bounds both: a child killed after ``timeout_s`` gives a failure with
 reason ``timeout``, a child that dies gives ``crashed``; either names the object and the reason,
 and the caller goes on with the next object. Used by `datagen prepare` and by the job workers.
+The children are long-lived worker interpreters (`isolated_worker`), one object at a time each:
+started once, not once per object, and replaced when one is killed or dies.
 
     p = process_isolated(entry, cfg, root, timeout_s=300)   # a ProcessedObject, never raises
     p.ok, p.reason, p.message
@@ -21,13 +23,11 @@ cache entry of those bytes is returned without starting a child.
 from __future__ import annotations
 
 import hashlib
-import multiprocessing as mp
 import threading
 from pathlib import Path
 from typing import Callable
 
-from datagen._interrupt import on_sigint, sigint_blocked
-
+from . import isolated_worker
 from .cache import cache_root
 from .config import ProcessConfig
 from .errors import ObjectError, Reason
@@ -68,20 +68,26 @@ class Children:
                 proc.kill()
 
 
-def _child(conn, step: Step, entry: ManifestEntry, cfg_dict: dict, root: str) -> None:
-    """Process one object; always sends (status, reason, message, entry, cache_hit) unless the
-    process dies (a Ctrl-C ends it at once, without a traceback)."""
-    on_sigint("die")
+def _reply(step: Step, entry: ManifestEntry, cfg_dict: dict, root: str) -> tuple:
+    """Process one object (in a worker); ``(status, reason, message, entry, cache_hit)``, never
+    raises for what the object or the cache does."""
     try:
         try:
             p = step(entry.ref(), ProcessConfig.from_dict(cfg_dict), root, entry.sha256)
-            msg = (p.status, p.reason, p.message, str(p.entry) if p.entry else "", p.cache_hit)
+            return (p.status, p.reason, p.message, str(p.entry) if p.entry else "", p.cache_hit)
         except ObjectError as exc:
-            msg = ("failed", exc.reason.value, str(exc), "", False)
+            return ("failed", exc.reason.value, str(exc), "", False)
     except Exception as exc:  # noqa: BLE001 - e.g. an unwritable cache: a cause, not a crash
-        msg = ("failed", "error", f"{entry.id}: {type(exc).__name__}: {exc}", "", False)
-    conn.send(msg)
-    conn.close()
+        return ("failed", "error", f"{entry.id}: {type(exc).__name__}: {' '.join(str(exc).split())}", "", False)
+
+
+def _release(worker: isolated_worker.IsolatedWorker, children: Children | None, kill: bool) -> None:
+    if children is not None:
+        children._discard(worker)
+    if kill:
+        worker.close()
+    else:
+        isolated_worker.give(worker)
 
 
 def _failed(entry: ManifestEntry, reason: str, message: str) -> ProcessedObject:
@@ -93,9 +99,9 @@ def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path 
                      children: Children | None = None) -> ProcessedObject:
     """The processed object of manifest ``entry`` (see the module docstring), labelled with the
     entry's id: from the cache under ``root`` if there, else built by ``step`` (default
-    `process_object`; a module-level function, so the child can import it) in a fresh process
+    `process_object`; a module-level function, so the worker can import it) in a worker process
     that is killed after ``timeout_s`` seconds (``remedy``: the caller's advice in that message;
-    ``children``: where the process is registered while it runs). Never raises for a bad, slow
+    ``children``: where the worker is registered while it runs). Never raises for a bad, slow
     or crashing object."""
     try:
         ref = entry.ref()
@@ -111,31 +117,41 @@ def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path 
         return _failed(entry, "error", f"{entry.id}: {type(exc).__name__}: {exc}")
     if hit is not None:
         return hit
-    ctx = mp.get_context("spawn")  # no fork: the parent may hold threads (torch, Ray)
-    parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(child, step, entry, cfg.to_dict(), str(cache_root(root))), daemon=True)
-    with sigint_blocked():  # until the child has set its Ctrl-C policy
-        proc.start()
-    child.close()
-    if children is not None:
-        children._add(proc)
+    worker = None
     try:
-        if not parent.poll(timeout_s):
+        for _ in range(2):  # an idle worker can have died since (Ctrl-C, OOM): one fresh retry
+            worker = isolated_worker.take()
+            if children is not None:
+                children._add(worker)
+            try:
+                worker.submit((_reply, (step, entry, cfg.to_dict(), str(cache_root(root)))))
+                break
+            except (BrokenPipeError, ConnectionResetError):
+                _release(worker, children, kill=True)
+                worker = None
+        if worker is None:
+            return _failed(entry, Reason.CRASHED.value, f"{entry.id}: no processing worker could be started")
+        try:
+            kind, reply = worker.result(timeout_s)
+        except TimeoutError:
+            _release(worker, children, kill=True)
             return _failed(entry, Reason.TIMEOUT.value,
                            f"{entry.id}: processing exceeded {timeout_s:g} s and was killed ({remedy})")
-        try:
-            status, reason, message, path, cache_hit = parent.recv()
-        except EOFError:
-            proc.join(5)
+        except (EOFError, ConnectionResetError):
+            code = worker.exitcode()  # it is exiting: its own code, not the kill's
+            _release(worker, children, kill=True)
             return _failed(entry, Reason.CRASHED.value, f"{entry.id}: the processing process died "
-                           f"(exit code {proc.exitcode})")
-    finally:
-        if proc.is_alive():
-            proc.kill()
-        proc.join(5)
-        parent.close()
-        if children is not None:
-            children._discard(proc)
+                           f"(exit code {code})")
+    except OSError as exc:  # the worker could not be started (no memory, no processes left)
+        if worker is not None:
+            _release(worker, children, kill=True)
+        return _failed(entry, Reason.CRASHED.value, f"{entry.id}: cannot start a processing process: "
+                       f"{type(exc).__name__}: {exc}")
+    _release(worker, children, kill=False)
+    if kind != "ok":
+        return _failed(entry, "error", f"{entry.id}: the processing worker cannot load its task ({reply}); "
+                       "the step must be importable by module (not defined in __main__)")
+    status, reason, message, path, cache_hit = reply
     if status != "ok":
         out = _failed(entry, reason, message)
         return out if not path else ProcessedObject(entry.id, "failed", reason, message, entry=Path(path),

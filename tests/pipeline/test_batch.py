@@ -132,3 +132,37 @@ def test_a_tasks_synth_block_lies_under_the_run_config():
     fc = load_task("force_closure")
     cfg = SynthConfig(iters=7)
     assert not fc.synth and cfg.for_task(fc) is cfg
+
+
+def test_evaluation_in_a_pool_gives_the_same_rows_and_finds_a_failing_target(world, tmp_path):
+    """``eval_workers`` > 1 (a shard with several CPUs): the rows of all targets go to one pool,
+    with the same verdicts as one process; when the pool's call raises, each target is evaluated
+    on its own and only the bad one becomes a failure. The caller's torch threads are kept."""
+    from datagen.pipeline import evaluate_rows, synthesize_rows
+    from datagen.tasks import load_task
+
+    objs, cache, hand = world
+    box, ball = BatchObject(objs["box.obj"], (0.07, 0.09), object_id="box"), BatchObject(objs["ball.obj"], (0.08,),
+                                                                                        object_id="ball")
+    targets = build_targets([box, ball], grid_resolution=16, cache=cache)
+    _, table = synthesize_rows(hand, targets, load_task("force_closure"), SynthConfig(iters=10, num_directions=16), 2)
+    table = table.set_column(table.schema.get_field_index("object_path"), "object_path",
+                             [[str(objs[r["object_id"] + ".obj"].entry) for r in table.select(["object_id"]).to_pylist()]])
+    cfg = EvalConfig.from_dict(TINY_EVAL)
+    torch.set_num_threads(2)
+    try:
+        one = evaluate_rows(table, targets, "force_closure", cfg, workers=1)
+        assert torch.get_num_threads() == 2
+        pool = evaluate_rows(table, targets, "force_closure", cfg, workers=2)
+        assert [t.num_rows for t in pool] == [2, 2, 2]
+        assert [_clean(t.to_pylist()) for t in pool] == [_clean(t.to_pylist()) for t in one]
+        # the ball's object file is gone: its rows fail in the pool, then alone, and only they
+        broken = table.set_column(table.schema.get_field_index("object_path"), "object_path",
+                                  [[p if "ball" not in o else str(tmp_path / "gone")
+                                    for o, p in zip(table["object_id"].to_pylist(), table["object_path"].to_pylist())]])
+        fails = []
+        got = evaluate_rows(broken, targets, "force_closure", cfg, workers=2, failures=fails)
+        assert [_clean(t.to_pylist()) for t in got] == [_clean(t.to_pylist()) for t in one[:2]]
+        assert [(f["object_id"], f["stage"]) for f in fails] == [("ball", "eval")]
+    finally:
+        torch.set_num_threads(1)
