@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import torch
 
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
+from datagen.synth.stacked import grid_distance, grid_query
 from datagen.wrench import task_energy
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
@@ -64,6 +65,10 @@ def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, ex
 
     ``exact=False`` uses the objects' SDF grids (fast, ~0.2 mm) instead of the exact mesh.
     """
+    if not exact:
+        stacked = grid_query(targets, object_index, points)  # one call for all targets (same values)
+        if stacked is not None:
+            return stacked
     B, N, _ = points.shape
     dist = points.new_zeros(B, N)
     closest = torch.zeros_like(points)
@@ -85,6 +90,9 @@ def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, ex
 
 def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
     """Approximate (grid) signed distance of per-sample objects, ``(B, N)``."""
+    stacked = grid_distance(targets, object_index, points)  # one call for all targets (same values)
+    if stacked is not None:
+        return stacked
     dist = points.new_zeros(points.shape[:-1])
     for k, target in enumerate(targets):
         sel = (object_index == k).nonzero().squeeze(-1)
