@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import machine_description
+from benchmarks.common import machine_description, write_report
 from datagen.objects import isolated_worker
 from datagen.objects.isolate import process_isolated
 from datagen.objects.manifest import build_manifest
@@ -89,9 +89,7 @@ def main() -> None:
         lines.append(f"| {m} | {w:.1f} | {', '.join(f'{x:.1f}' for x in walls[m])} | "
                      f"{statistics.median(pers[m]):.2f} | {w / base:.2f} |")
     lines += ["", f"Processed pieces identical in every run: {'yes' if len(digests) == 1 else 'NO'}.", ""]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
-    print("\n".join(lines))
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

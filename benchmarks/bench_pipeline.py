@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import machine_description
+from benchmarks.common import machine_description, write_report
 from workers.job import JobConfig
 from workers.run import run_job
 
@@ -147,9 +147,7 @@ def main(argv=None) -> int:
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
     if cold is not None:
         lines += _cold_lines(*cold)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text("\n".join(lines))
-    print("\n".join(lines))
+    write_report(args.out, lines)
     return 0
 
 

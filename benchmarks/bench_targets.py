@@ -21,7 +21,7 @@ import torch
 import trimesh
 
 import datagen.synth.energies as energies
-from benchmarks.common import machine_description
+from benchmarks.common import machine_description, write_report
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
 from datagen.tasks import load_task
@@ -68,9 +68,7 @@ def main() -> None:
         a, b = (statistics.median(times[(c, m)]) for m in modes)
         lines.append(f"| {c} | {a:.2f} | {b:.2f} | {a / b:.2f} |")
     lines += ["", f"Poses identical across modes and runs: {'yes' if same else 'NO'}.", ""]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
-    print("\n".join(lines))
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -42,3 +42,14 @@ def machine_description() -> str:
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
     return (f"{cpu}; {os.cpu_count()} cores; {mem}; {gpu}; torch {torch.__version__} "
             f"({torch.get_num_threads()} threads); Python {platform.python_version()}; load avg at start {load:.2f}")
+
+
+def write_report(path, lines: list[str], echo: bool = True) -> None:
+    """Write a benchmark's markdown ``lines`` to ``path`` (its folder made) and, by default, print them."""
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines))
+    if echo:
+        print("\n".join(lines))

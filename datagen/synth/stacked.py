@@ -37,7 +37,8 @@ def _stack(targets, dtype: torch.dtype):
     lo = torch.stack([g.lo.to(dtype) for g in grids])[:, None]  # (T, 1, 3)
     hi = torch.stack([g.hi.to(dtype) for g in grids])[:, None]
     scale = torch.tensor([t.scale for t in targets], dtype=dtype, device=values.device)[:, None]  # (T, 1)
-    cell = [float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * t.scale for g, t in zip(grids, targets)]
+    cell = torch.tensor([float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * t.scale
+                         for g, t in zip(grids, targets)], dtype=dtype, device=values.device)  # (T,) one cell, m
     _CACHE[key] = (tuple(targets), values, lo, hi, scale, cell)
     while len(_CACHE) > 2:
         _CACHE.popitem(last=False)
@@ -84,7 +85,7 @@ def grid_query(targets, object_index: torch.Tensor, points: torch.Tensor):
     B, N, _ = points.shape
     p = points.reshape(len(targets), n * N, 3)
     with torch.no_grad():
-        h = torch.tensor(stack[4], dtype=p.dtype, device=p.device)  # (T,) one cell, m
+        h = stack[4]  # (T,) one cell, m
         pd = p.detach()
         offs = torch.eye(3, dtype=p.dtype, device=p.device)[None] * h[:, None, None]  # (T, 3, 3)
         grad = torch.stack([_distance(stack, pd + offs[:, None, k]) - _distance(stack, pd - offs[:, None, k])
