@@ -21,6 +21,7 @@ import torch
 import trimesh
 
 import datagen.synth.energies as energies
+import datagen.synth.penetration as penetration
 from benchmarks.common import machine_description, write_report
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
@@ -44,20 +45,20 @@ def main() -> None:
              "64 targets x 8 poses": ([GraspTarget.from_mesh(mesh, 0.06 + 0.0005 * k, f"c{k}", grid_resolution=32)
                                        for k in range(64)], 8)}
     cfg = SynthConfig(iters=args.iters, seed=0)
-    stacked = (energies.grid_distance, energies.grid_query)
+    stacked = (penetration._stacked_candidate_distance, energies.grid_query)
     modes = {"stacked grids (default)": stacked, "one query per target": (lambda *a: None, lambda *a: None)}
     times = {(c, m): [] for c in cases for m in modes}
     poses = {}
     for r in range(args.repeats):
         for m, (gd, gq) in (modes.items() if r % 2 == 0 else reversed(list(modes.items()))):
-            energies.grid_distance, energies.grid_query = gd, gq
+            penetration._stacked_candidate_distance, energies.grid_query = gd, gq
             for c, (targets, per) in cases.items():
                 t0 = time.perf_counter()
                 res = synthesize(hand, targets, task, cfg, per)
                 times[(c, m)].append(time.perf_counter() - t0)
                 poses.setdefault(c, []).append(res.grasp)
             print(r, m, {c: round(times[(c, m)][-1], 2) for c in cases}, flush=True)
-    energies.grid_distance, energies.grid_query = stacked
+    penetration._stacked_candidate_distance, energies.grid_query = stacked
     same = all(all(torch.equal(p, ps[0]) for p in ps) for ps in poses.values())
     lines = ["# Many targets in one synthesis batch", "", f"Machine: {machine_description()}", "",
              f"Commit {code_version()}.", "",

@@ -32,6 +32,7 @@ class GridSDF:
     def __init__(self, values: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor):
         self.values = values  # (R, R, R), indexed [x, y, z]
         self.lo, self.hi = lo, hi
+        self._floor: float | None = None  # boundary_floor(), computed on first use
 
     @classmethod
     def from_mesh(cls, vertices, faces, *, resolution: int = 64, margin: float = 0.25,
@@ -68,6 +69,15 @@ class GridSDF:
             sign[ambiguous] = np.where(d < 0, -1.0, 1.0)
         values = torch.as_tensor((sign * dist).reshape((resolution,) * 3), dtype=dtype)
         return cls(values, torch.as_tensor(lo, dtype=dtype), torch.as_tensor(hi, dtype=dtype))
+
+    def boundary_floor(self) -> float:
+        """The least value on the grid's six faces (normalized units): every distance this grid
+        gives outside its box is at least this plus the distance to the box (see `distance`)."""
+        if self._floor is None:
+            v = self.values
+            self._floor = float(torch.stack([v[0].min(), v[-1].min(), v[:, 0].min(), v[:, -1].min(),
+                                             v[:, :, 0].min(), v[:, :, -1].min()]).min())
+        return self._floor
 
     def to(self, device) -> "GridSDF":
         """A copy on ``device`` (this one is unchanged, like ``torch.Tensor.to``)."""

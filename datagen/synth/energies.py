@@ -24,8 +24,9 @@ from dataclasses import dataclass
 
 import torch
 
+from datagen.synth.penetration import sphere_penetration
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
-from datagen.synth.stacked import grid_distance, grid_query
+from datagen.synth.stacked import grid_query
 from datagen.wrench import task_energy
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
@@ -88,19 +89,6 @@ def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, ex
     return dist, closest, normal
 
 
-def _grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
-    """Approximate (grid) signed distance of per-sample objects, ``(B, N)``."""
-    stacked = grid_distance(targets, object_index, points)  # one call for all targets (same values)
-    if stacked is not None:
-        return stacked
-    dist = points.new_zeros(points.shape[:-1])
-    for k, target in enumerate(targets):
-        sel = (object_index == k).nonzero().squeeze(-1)
-        if sel.numel():
-            dist = dist.index_copy(0, sel, target.distance(points[sel]).to(points.dtype))
-    return dist
-
-
 def contact_sphere_index(hand) -> torch.Tensor:
     """(F,) index of each fingertip's contact sphere: its link's sphere nearest the pad point."""
     out = []
@@ -130,8 +118,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     tips = centres[:, tip_spheres]
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
-    d_sph = _grid_distance(targets, object_index, centres)
-    pen = torch.relu(radii - sphere_margin - d_sph)
+    pen = sphere_penetration(targets, object_index, centres, radii - sphere_margin)  # (B, S) m
     lo, hi = hand.joint_lower, hand.joint_upper
     violation = (torch.relu(joints - hi) + torch.relu(lo - joints)).sum(-1)
     return HandObjectState(

@@ -18,12 +18,12 @@ from collections import OrderedDict
 import torch
 import torch.nn.functional as F
 
-__all__ = ["grid_distance", "grid_query"]
+__all__ = ["grid_distance", "grid_query", "per_target_rows", "stacked_distance", "stacked_grids"]
 
 _CACHE: OrderedDict = OrderedDict()  # key -> (targets, values, lo, hi, scale, cell); the last two batches
 
 
-def _stack(targets, dtype: torch.dtype):
+def stacked_grids(targets, dtype: torch.dtype):
     """The targets' grids stacked (cached for the batch), or None if they cannot be."""
     key = (tuple(id(t) for t in targets), dtype)
     hit = _CACHE.get(key)
@@ -45,7 +45,7 @@ def _stack(targets, dtype: torch.dtype):
     return values, lo, hi, scale, cell
 
 
-def _per_target(targets, object_index: torch.Tensor) -> int:
+def per_target_rows(targets, object_index: torch.Tensor) -> int:
     """Rows per target if ``object_index`` is ``arange(T).repeat_interleave(n)``, else 0."""
     T, B = len(targets), object_index.shape[0]
     if T < 2 or B % T:
@@ -54,7 +54,7 @@ def _per_target(targets, object_index: torch.Tensor) -> int:
     return n if torch.equal(object_index, torch.arange(T, device=object_index.device).repeat_interleave(n)) else 0
 
 
-def _distance(stack, p: torch.Tensor) -> torch.Tensor:
+def stacked_distance(stack, p: torch.Tensor) -> torch.Tensor:
     """Grid distance (m) of points ``(T, P, 3)`` m, ``(T, P)``: `GridSDF.distance` per target."""
     values, lo, hi, scale, _ = stack
     q = p / scale[..., None]
@@ -67,19 +67,19 @@ def _distance(stack, p: torch.Tensor) -> torch.Tensor:
 
 def grid_distance(targets, object_index: torch.Tensor, points: torch.Tensor) -> torch.Tensor | None:
     """``(B, N)`` grid distances of points ``(B, N, 3)`` (the layout of the module docstring), or None."""
-    n = _per_target(targets, object_index)
-    stack = _stack(targets, points.dtype) if n else None
+    n = per_target_rows(targets, object_index)
+    stack = stacked_grids(targets, points.dtype) if n else None
     if stack is None:
         return None
     B, N, _ = points.shape
-    return _distance(stack, points.reshape(len(targets), n * N, 3)).reshape(B, N)
+    return stacked_distance(stack, points.reshape(len(targets), n * N, 3)).reshape(B, N)
 
 
 def grid_query(targets, object_index: torch.Tensor, points: torch.Tensor):
     """``(distance (B, N), closest (B, N, 3), outward normal (B, N, 3))`` as
     `GraspTarget.approx_query` per target, or None (see the module docstring)."""
-    n = _per_target(targets, object_index)
-    stack = _stack(targets, points.dtype) if n else None
+    n = per_target_rows(targets, object_index)
+    stack = stacked_grids(targets, points.dtype) if n else None
     if stack is None:
         return None
     B, N, _ = points.shape
@@ -88,8 +88,8 @@ def grid_query(targets, object_index: torch.Tensor, points: torch.Tensor):
         h = stack[4]  # (T,) one cell, m
         pd = p.detach()
         offs = torch.eye(3, dtype=p.dtype, device=p.device)[None] * h[:, None, None]  # (T, 3, 3)
-        grad = torch.stack([_distance(stack, pd + offs[:, None, k]) - _distance(stack, pd - offs[:, None, k])
+        grad = torch.stack([stacked_distance(stack, pd + offs[:, None, k]) - stacked_distance(stack, pd - offs[:, None, k])
                             for k in range(3)], dim=-1)
         nrm = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    d = _distance(stack, p)
+    d = stacked_distance(stack, p)
     return d.reshape(B, N), (p - d[..., None] * nrm).reshape(B, N, 3), nrm.reshape(B, N, 3)
