@@ -63,15 +63,21 @@ class EpsilonSearch:
 
 
 def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, search, generator, denom):
-    """Minimize ``h(u) / denom(u)`` over unit ``u``; returns the minimizer ``(..., 6)`` and scale."""
+    """Minimize ``h(u) / denom(u)`` over unit ``u``; returns the minimizer ``(..., 6)``, the scale
+    of ``h`` and the minimum found.
+
+    Samples whose best seed direction is already at or below ``zero_tol`` x the scale are reported
+    as 0 by the callers whatever the descent finds (it can only lower the minimum), so with one
+    batch dimension they skip the descent (their minimizer is that seed direction)."""
     with torch.no_grad():
         p, n = points.detach(), normals.detach()
         G, scale = grasp_matrix(p, n, normalize=normalize, contact_model=contact_model)
         m = p.shape[-2]
         kw = dict(contact_model=contact_model, torsional_mu=torsional_mu, normalize=normalize)
 
-        def objective_and_grad(u):
-            s = boundary_from_matrix(G, scale, u, mu, m, 0.0, **kw)  # exact support point = grad h
+        def objective_and_grad(u, G=G, scale=scale, s=None):
+            if s is None:
+                s = boundary_from_matrix(G, scale, u, mu, m, 0.0, **kw)  # exact support point = grad h
             h = (u * s).sum(-1)
             if denom is None:
                 return h, s
@@ -87,28 +93,48 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
 
         gen = generator if generator is not None else torch.Generator().manual_seed(search.seed)
         seeds = sample_directions(search.num_samples, generator=gen, device=p.device, dtype=p.dtype)
-        vals, _ = objective_and_grad(seeds)
-        h_scale = (seeds * boundary_from_matrix(G, scale, seeds, mu, m, 0.0, **kw)).sum(-1).amax(-1)
+        s_seeds = boundary_from_matrix(G, scale, seeds, mu, m, 0.0, **kw)  # one support evaluation serves both
+        vals, _ = objective_and_grad(seeds, s=s_seeds)
+        h_scale = (seeds * s_seeds).sum(-1).amax(-1)
         idx = vals.topk(search.num_starts, dim=-1, largest=False).indices  # (..., S)
         u = seeds[idx] if seeds.dim() == 2 else torch.gather(seeds, -2, idx[..., None].expand(*idx.shape, 6))
         best_u, best_v = u.clone(), torch.gather(vals, -1, idx)
-        decay = (search.step_final_rad / search.step0_rad) ** (1.0 / max(search.iters, 1))
-        step = search.step0_rad
-        for _ in range(search.iters):
-            val, grad = objective_and_grad(u)
-            better = val < best_v
-            best_v = torch.where(better, val, best_v)
-            best_u = torch.where(better[..., None], u, best_u)
-            g_r = grad - (grad * u).sum(-1, keepdim=True) * u
-            u = safe_normalize(u - step * safe_normalize(g_r))
-            step *= decay
-        val, _ = objective_and_grad(u)
+        one_batch_dim = p.dim() == 3 and not (torch.is_tensor(mu) and mu.dim() > 0)
+        if one_batch_dim:
+            rows = (best_v.amin(-1) > search.zero_tol * h_scale).nonzero().squeeze(-1)
+            if rows.numel() < p.shape[0]:  # descend only where the minimum can still be > 0
+                if rows.numel():
+                    Gr, sr = G[rows], scale[rows]
+                    ur, vr = _descend(lambda x: objective_and_grad(x, Gr, sr), u[rows], best_u[rows], best_v[rows], search)
+                    best_u, best_v = best_u.index_copy(0, rows, ur), best_v.index_copy(0, rows, vr)
+                return _best(best_u, best_v, h_scale)
+        best_u, best_v = _descend(objective_and_grad, u, best_u, best_v, search)
+        return _best(best_u, best_v, h_scale)
+
+
+def _descend(objective_and_grad, u, best_u, best_v, search: EpsilonSearch):
+    """Riemannian subgradient descents from the starts ``u (..., S, 6)``; the best point and value
+    of each start, ``best_u (..., S, 6)``, ``best_v (..., S)`` (updated from the given ones)."""
+    decay = (search.step_final_rad / search.step0_rad) ** (1.0 / max(search.iters, 1))
+    step = search.step0_rad
+    for _ in range(search.iters):
+        val, grad = objective_and_grad(u)
         better = val < best_v
         best_v = torch.where(better, val, best_v)
         best_u = torch.where(better[..., None], u, best_u)
-        k = best_v.argmin(dim=-1, keepdim=True)
-        u_star = torch.gather(best_u, -2, k[..., None].expand(*k.shape, 6)).squeeze(-2)
-        return u_star, h_scale, torch.gather(best_v, -1, k).squeeze(-1)
+        g_r = grad - (grad * u).sum(-1, keepdim=True) * u
+        u = safe_normalize(u - step * safe_normalize(g_r))
+        step *= decay
+    val, _ = objective_and_grad(u)
+    better = val < best_v
+    return torch.where(better[..., None], u, best_u), torch.where(better, val, best_v)
+
+
+def _best(best_u, best_v, h_scale):
+    """The best start of each sample: ``(u* (..., 6), h_scale (...), minimum (...))``."""
+    k = best_v.argmin(dim=-1, keepdim=True)
+    u_star = torch.gather(best_u, -2, k[..., None].expand(*k.shape, 6)).squeeze(-2)
+    return u_star, h_scale, torch.gather(best_v, -1, k).squeeze(-1)
 
 
 def epsilon_metric(

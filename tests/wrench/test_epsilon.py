@@ -144,3 +144,23 @@ def test_task_epsilon_zero_when_task_direction_uncovered():
 def test_search_config_is_validated():
     with pytest.raises(ValueError, match="num_starts"):
         EpsilonSearch(num_samples=4, num_starts=8)
+
+
+def test_samples_not_in_force_closure_skip_the_search_and_the_others_are_unchanged():
+    """A batch mixing force-closure and non-closure contact sets: the non-closure samples (whose
+    best seed direction already has support 0) are exactly 0 without their descent, and the
+    force-closure samples get the values they get in a batch of their own."""
+    fc = [_case(s, 4, "sphere") for s in (0, 2, 3)]
+    z = np.array([0.0, 0.0, 1.0])
+    flat = (np.array([[0.0, 0, -0.03], [0.01, 0, -0.03], [0, 0.01, -0.03], [0.01, 0.01, -0.03]]), np.tile(z, (4, 1)))
+    mixed = [flat, fc[0], flat, fc[1], fc[2]]
+    P = torch.tensor(np.stack([c[0] for c in mixed]), requires_grad=True)
+    N = torch.tensor(np.stack([c[1] for c in mixed]))
+    eps = epsilon_metric(P, N, 1.0)
+    alone = epsilon_metric(torch.tensor(np.stack([c[0] for c in fc])), torch.tensor(np.stack([c[1] for c in fc])), 1.0)
+    assert eps[0].item() == 0.0 and eps[2].item() == 0.0
+    assert torch.allclose(eps[[1, 3, 4]], alone, rtol=1e-9) and bool((alone > 0).all())
+    (g,) = torch.autograd.grad(eps.sum(), P)
+    assert torch.isfinite(g).all() and float(g[[0, 2]].abs().max()) == 0.0
+    t_eps = task_epsilon(P.detach(), N, 1.0, [0, 0, -1, 0, 0, 0], 30.0)  # the flat set only pushes +z
+    assert t_eps[0].item() == 0.0 and t_eps[2].item() == 0.0 and bool((t_eps[[1, 3, 4]] > 0).all())
