@@ -31,6 +31,7 @@ from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
 from datagen.tasks import load_task
 from datagen.synth.energies import contact_sphere_index
+from datagen.synth.penetration import sphere_penetration
 from datagen.synth.init import initial_poses
 from datagen.wrench import sample_directions, task_energy
 from workers.job import code_version
@@ -79,9 +80,9 @@ def stage_breakdown(hand, target, B: int, K: int) -> dict[str, float]:
         T = hand.link_transforms(root, joints)
         centres, radii = hand.spheres(root, joints, transforms=T)
 
-    def penetration():
+    def penetration():  # the synthesis's query: only spheres that can penetrate are sampled
         c = centres.clone().requires_grad_(True)
-        torch.relu(radii - target.distance(c)).square().sum().backward()
+        sphere_penetration([target], oi, c, radii).square().sum().backward()
 
     def contacts():
         c = centres[:, tips_idx].clone().requires_grad_(True)
