@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import machine_description, write_report
+from benchmarks.common import hand_notes, machine_description, write_report
 from workers.job import JobConfig
 from workers.run import run_job
 
@@ -147,7 +147,7 @@ def main(argv=None) -> int:
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
     if cold is not None:
         lines += _cold_lines(*cold)
-    write_report(args.out, lines)
+    write_report(args.out, lines + hand_notes(args.out))
     return 0
 
 

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 import trimesh
 
-from benchmarks.common import machine_description, median_time
+from benchmarks.common import hand_notes, machine_description, median_time
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig, synthesize
 from datagen.tasks import load_task
@@ -244,7 +244,7 @@ def main():
     if hands:
         lines += per_hand_table(hands, target, task, dev, sync, args.repeats)
     verdict = f"synth: wall_K100={summary[100]:.1f}s wall_K1e4={summary[10_000]:.1f}s peak_mem={_peak_mb(dev):.0f}MB"
-    lines += ["```", verdict, "```", ""]
+    lines += hand_notes(out) + ["```", verdict, "```", ""]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines))
     print(verdict)

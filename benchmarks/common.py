@@ -53,3 +53,19 @@ def write_report(path, lines: list[str], echo: bool = True) -> None:
     path.write_text("\n".join(lines))
     if echo:
         print("\n".join(lines))
+
+
+def hand_notes(path, heading: str = "## Notes") -> list[str]:
+    """The hand-written section of a report (from ``heading`` up to a machine-readable fenced
+    block or the end), for a benchmark that rewrites the report to keep; [] if there is none."""
+    from pathlib import Path
+
+    path = Path(path)
+    if not path.is_file():
+        return []
+    lines = path.read_text().splitlines()
+    start = next((i for i, x in enumerate(lines) if x.startswith(heading)), None)
+    if start is None:
+        return []
+    end = next((i for i in range(start, len(lines)) if lines[i].startswith("```")), len(lines))
+    return lines[start:end]
