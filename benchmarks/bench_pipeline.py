@@ -130,7 +130,7 @@ def main(argv=None) -> int:
                      f"{s['grasps'] / core_h:.0f} | {cpu:.1f} | {s['success'] / max(cpu, 1e-9) * 3600:.0f} |")
     thr = {w: s["success"] / wall for w, (wall, s) in results.items()}
     per_obj = results[2][0] / cfg.count  # wall s per object with 2 workers, Ray start-up included
-    lines += ["", f"At the user's scale: {per_obj:.1f} s wall per object with 2 workers -> `datagen run --scale 5000` "
+    lines += ["", f"At the user's scale: {per_obj:.1f} s wall per object with 2 workers -> `datagen run --objects 5000` "
                   f"(this job's config) extrapolates to {5000 * per_obj / 3600:.1f} h on 2 cores (linear; the "
                   "start-up share shrinks with more objects)."]
     lines += ["", f"Scaling ratio (validated grasps per wall second, 2 workers / 1 worker): "
@@ -147,7 +147,7 @@ def main(argv=None) -> int:
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
     if cold is not None:
         lines += _cold_lines(*cold)
-    write_report(args.out, lines + hand_notes(args.out))
+    write_report(args.out, lines + hand_notes(args.out) + [""])
     return 0
 
 
