@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 import torch
 
-from benchmarks.common import machine_description
+from benchmarks.common import hand_notes, machine_description
 from datagen.eval import EvalConfig, Evaluator
 from datagen.eval.config import DIRECTIONS
 from datagen.eval.hold import close_hand, initial_state
@@ -195,6 +195,9 @@ def main(argv=None) -> None:
                   f"- successes: palm {sum(x[1] for x in agreement)}, spec {sum(x[2] for x in agreement)}"]
     lines += ["", f"Objects: {', '.join(objects)}.", "",
               f"Total benchmark time: {time.perf_counter() - t_start:.0f} s."]
+    # keep the hand-written notes, and an earlier run's rooting section when this run has none
+    kept = hand_notes(args.out) if args.agreement else (hand_notes(args.out, "## Rooting") or hand_notes(args.out))
+    lines += [""] + kept if kept else []
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
