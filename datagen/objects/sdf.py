@@ -28,6 +28,18 @@ import trimesh
 __all__ = ["SDFResult", "MeshSDF", "closest_on_triangles"]
 
 _PAIR_BUDGET = 4_000_000  # (point, triangle) pairs per brute-force chunk
+_BLOCK = 8  # culling-grid cells per block edge: the builder bounds its triangles per block of 8^3 cells
+
+
+def _blocks(res: int, b: int):
+    """Flat indices (``[i, j, k]`` order, k fastest) of the cells of each ``b^3`` block of a
+    ``res^3`` grid."""
+    for i in range(0, res, b):
+        for j in range(0, res, b):
+            for k in range(0, res, b):
+                ii, jj, kk = torch.meshgrid(torch.arange(i, min(i + b, res)), torch.arange(j, min(j + b, res)),
+                                            torch.arange(k, min(k + b, res)), indexing="ij")
+                yield ((ii * res + jj) * res + kk).reshape(-1)
 
 
 @dataclass
@@ -159,17 +171,27 @@ class MeshSDF:
         box_lo, box_hi = tris.amin(1), tris.amax(1)               # triangle AABBs (F, 3)
         cells = torch.zeros(len(centres), max_k, dtype=torch.long)
         counts = torch.zeros(len(centres), dtype=torch.long)
-        step = max(1, _PAIR_BUDGET // len(tris))
         with torch.no_grad():
-            for s in range(0, len(centres), step):
-                cs = centres[s:s + step]
-                gap = torch.maximum(box_lo - cs[:, None], cs[:, None] - box_hi).clamp_min(0)
-                lb = gap.norm(dim=-1)                             # <= exact distance (n, F)
-                near = lb.topk(min(8, len(tris)), dim=-1, largest=False).indices
-                t = tris[near]                                    # (n, 8, 3, 3)
+            for ids in _blocks(res, _BLOCK):
+                cs = centres[ids]
+                # Triangles that can matter to any cell of the block: every cell is within U of the
+                # mesh (U: the farthest point of the block's box from the nearest triangle vertex,
+                # minimized over triangles), so a triangle whose AABB lies farther than U + reach
+                # from the block's box cannot pass the per-cell filter below. Restricting to the
+                # rest changes no cell's result (same pairs kept, same distances), only the work.
+                cmin, cmax = cs.amin(0), cs.amax(0)
+                far = torch.maximum((tris[:, 0] - cmin).abs(), (tris[:, 0] - cmax).abs()).norm(dim=-1)
+                bound = float(far.min()) * (1 + 1e-5) + 1e-7 + reach
+                gap_b = torch.maximum(box_lo - cmax, cmin - box_hi).clamp_min(0).norm(dim=-1)
+                sel = (gap_b <= bound).nonzero().squeeze(-1)      # (F',) global triangle indices
+                gap = torch.maximum(box_lo[sel] - cs[:, None], cs[:, None] - box_hi[sel]).clamp_min(0)
+                lb = gap.norm(dim=-1)                             # <= exact distance (n, F')
+                near = lb.topk(min(8, len(sel)), dim=-1, largest=False).indices
+                t = tris[sel[near]]                               # (n, 8, 3, 3)
                 q, _ = closest_on_triangles(cs[:, None], t[..., 0, :], t[..., 1, :], t[..., 2, :])
                 ub = (cs[:, None] - q).norm(dim=-1).amin(-1)      # >= exact distance
                 pi, fi = (lb <= (ub + reach)[:, None]).nonzero(as_tuple=True)
+                fi = sel[fi]
                 t = tris[fi]
                 q, _ = closest_on_triangles(cs[pi], t[:, 0], t[:, 1], t[:, 2])
                 d = (cs[pi] - q).norm(dim=-1)
@@ -177,12 +199,12 @@ class MeshSDF:
                 keep = d <= dmin[pi] + reach
                 dense = torch.full((len(cs), len(tris)), torch.inf, dtype=d.dtype)
                 dense[pi[keep], fi[keep]] = d[keep]
-                counts[s:s + step] = torch.isfinite(dense).sum(-1)
+                counts[ids] = torch.isfinite(dense).sum(-1)
                 k = min(max_k, len(tris))
                 val, order = dense.topk(k, dim=-1, largest=False)
                 first = order[:, :1]
-                cells[s:s + step, :k] = torch.where(torch.isfinite(val), order, first)
-                cells[s:s + step, k:] = first
+                cells[ids, :k] = torch.where(torch.isfinite(val), order, first)
+                cells[ids, k:] = first
         dev = self.vertices.device
         self.cells, self.counts = cells.to(dev), counts.to(dev)
         self.overflow = self.counts > max_k
