@@ -7,26 +7,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 import torch
-import trimesh
 
-from datagen.synth import GraspTarget
 from datagen.synth.penetration import _candidates, sphere_penetration
 
 from ..conftest import DEVICES
-
-
-def _targets(resolutions=(24, 24, 24)):
-    cyl = trimesh.creation.cylinder(radius=0.35, height=1.0, sections=32)
-    box = trimesh.creation.box((1.0, 0.7, 0.5))
-    out = []
-    for mesh, scale, res in zip((cyl, box, cyl), (0.07, 0.08, 0.1), resolutions):
-        mesh = mesh.copy()
-        mesh.apply_scale(1 / np.linalg.norm(0.5 * mesh.extents))
-        out.append(GraspTarget.from_mesh(mesh, scale, f"t{scale}", grid_resolution=res))
-    return out
+from .grids import grid_targets as _targets
 
 
 def _spheres(B: int, S: int, device, spread: float = 0.3):

@@ -4,26 +4,13 @@ layout or the grids do not allow stacking (the caller then loops over the target
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import torch
-import trimesh
 
-from datagen.synth import GraspTarget
 from datagen.synth.stacked import grid_distance, grid_query
 
 from ..conftest import DEVICES
-
-
-def _targets(resolutions=(24, 24, 24)):
-    cyl = trimesh.creation.cylinder(radius=0.35, height=1.0, sections=32)
-    box = trimesh.creation.box((1.0, 0.7, 0.5))
-    out = []
-    for mesh, scale, res in zip((cyl, box, cyl), (0.07, 0.08, 0.1), resolutions):
-        mesh = mesh.copy()
-        mesh.apply_scale(1 / np.linalg.norm(0.5 * mesh.extents))
-        out.append(GraspTarget.from_mesh(mesh, scale, f"t{scale}", grid_resolution=res))
-    return out
+from .grids import grid_targets as _targets
 
 
 def _points(n: int, device) -> torch.Tensor:
