@@ -7,7 +7,11 @@ across jobs; CoACD is measured by bench-objects). Reports validated (simulation-
 is wall time x worker CPUs, the scaling ratio (throughput with two workers / with one), and the
 worker seconds by stage summed from the job ledgers. Ray start-up is inside the wall time.
 
-    python -m benchmarks.bench_pipeline [--scale 4] [--grasps 8] [--cold 40] [--out benchmarks/results/pipeline.md]
+    python -m benchmarks.bench_pipeline [--scale 4] [--grasps 8] [--default-job 2] [--cold 40] [--out benchmarks/results/pipeline.md]
+
+``--default-job R`` adds the job `make dataset` runs (the default JobConfig: 6 objects, shard size
+"auto") on 2 workers, warm cache, R runs alternating with the same job at the previous fixed 2 objects
+per shard: validated grasps per core-hour of each, medians.
 
 ``--cold N`` adds the user's-scale view: N objects through a minimal config (1 grasp, 10
 iterations, one start, grid 16^3, one scale) from an empty cache with 2 workers, where object
@@ -20,8 +24,10 @@ core-hour carries a large sampling error; grasps per core-hour is the steadier t
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -69,6 +75,38 @@ def _cold_lines(cfg: JobConfig, wall: float, s: dict) -> list[str]:
             f"{s['stage_seconds'].get('shard_cpu_s', 0.0):.0f} s.", ""]
 
 
+def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
+    """The default job on 2 workers: shard size auto against 2 per shard, ``runs`` alternating runs each."""
+    modes = {"auto": JobConfig(), "2 per shard (the previous default)": JobConfig(objects_per_shard=2)}
+    _warm_cache(modes["auto"], cache)
+    walls = {m: [] for m in modes}
+    last = {}
+    for r in range(runs):
+        for m in (list(modes) if r % 2 == 0 else list(reversed(modes))):
+            out = tmp / "default"
+            t0 = time.perf_counter()
+            s = run_job(modes[m], out, num_cpus=2, cache=cache, progress=False)
+            walls[m].append(time.perf_counter() - t0)
+            last[m] = (s, JobConfig.from_dict(json.loads((out / "job.json").read_text())["config"]))
+            print(f"default job, {m}: {walls[m][-1]:.1f} s, {s['success']}/{s['grasps']} successful")
+            shutil.rmtree(out, ignore_errors=True)
+    cfg = modes["auto"]
+    lines = ["", "## The default job (`make dataset`), 2 workers", "",
+             f"The default JobConfig: {cfg.count} procedural objects at {list(cfg.scales)} m, {cfg.grasps_per_object} "
+             f"grasps per object and scale, synthesis {cfg.synth}, objects cache warm; {runs} alternating runs per "
+             "layout, median wall (Ray start-up included). Core-hour = wall x 2.", "",
+             "| objects per shard | shards | wall (s), median | runs (s) | grasps | validated | validated / core-hour |",
+             "|---|---|---|---|---|---|---|"]
+    for m in modes:
+        s, used = last[m]
+        wall = statistics.median(walls[m])
+        shards = -(-cfg.count // used.objects_per_shard)
+        lines.append(f"| {m}: {used.objects_per_shard} | {shards} | {wall:.1f} | "
+                     f"{', '.join(f'{w:.1f}' for w in walls[m])} | {s['grasps']} | {s['success']} | "
+                     f"{s['success'] / (wall * 2 / 3600):.0f} |")
+    return lines
+
+
 def _commit() -> str:
     import subprocess
 
@@ -87,6 +125,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scale", type=int, default=4)
     ap.add_argument("--grasps", type=int, default=8, help="grasps per object and scale")
     ap.add_argument("--cache", default=None, help="objects cache (default $DATAGEN_CACHE)")
+    ap.add_argument("--default-job", type=int, default=0, help="runs per layout of the default job (0: skip it)")
     ap.add_argument("--cold", type=int, default=0, help="objects of the cold-cache minimal job (0: skip it)")
     ap.add_argument("--out", default="benchmarks/results/pipeline.md")
     args = ap.parse_args(argv)
@@ -105,6 +144,7 @@ def main(argv=None) -> int:
             results[workers] = (wall, s)
             print(f"{workers} worker(s): {wall:.1f} s, {s['success']}/{s['grasps']} successful")
             shutil.rmtree(out, ignore_errors=True)
+        default = _default_job(args.default_job, cache, Path(tmp)) if args.default_job else []
         cold = _cold_job(args.cold, Path(tmp)) if args.cold else None
     load = os.getloadavg()
     lines = ["# Dataset pipeline throughput (`make bench-pipeline`)", "",
@@ -145,6 +185,7 @@ def main(argv=None) -> int:
     lines += ["", "Stages: process = objects cache lookup (and isolated CoACD on a miss), target = the "
               "synthesis target of each object (exact SDF, hull samples, the SDF grid read from the grid cache), synth = batched optimization, eval = MuJoCo tests, "
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
+    lines += default
     if cold is not None:
         lines += _cold_lines(*cold)
     write_report(args.out, lines + hand_notes(args.out) + [""])

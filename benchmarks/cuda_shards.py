@@ -17,7 +17,7 @@ import time
 import pyarrow.parquet as pq
 import torch
 
-from workers.job import JobConfig, JobDir, shard_slices
+from workers.job import PREFERRED_PER_SHARD, JobConfig, JobDir, shard_slices
 from workers.run import merge_failures, prepare_manifest
 from workers.shard import run_shard
 
@@ -28,7 +28,7 @@ def main() -> None:
     ap.add_argument("objects", type=int, nargs="?", default=6)
     ap.add_argument("--cpus", type=float, default=1.0, help="cpus_per_shard: torch threads and evaluation processes")
     args = ap.parse_args()
-    cfg = JobConfig(count=args.objects, cpus_per_shard=args.cpus)
+    cfg = JobConfig(count=args.objects, cpus_per_shard=args.cpus, objects_per_shard=PREFERRED_PER_SHARD)
     job = JobDir(args.out)
     job.init(cfg)
     entries = prepare_manifest(job, cfg)

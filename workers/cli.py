@@ -25,7 +25,9 @@ def register_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tasks", default=None, help="comma-separated task names (`datagen tasks`) or YAML paths "
                    "(default: force_closure)")
     p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: 8)")
-    p.add_argument("--objects-per-shard", type=int, default=None, help="objects per shard task (default: 2)")
+    p.add_argument("--objects-per-shard", type=_per_shard, default=None, metavar="N|auto",
+                   help="objects per shard task, or auto (the default): chosen for the object count and the "
+                        "worker slots when the job is created, e.g. 3 for the default 6 objects on 2 cores")
     p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
     p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores)")
@@ -41,6 +43,15 @@ def register_run(sub: argparse._SubParsersAction) -> None:
     # written atomically and only a ledger entry marks a shard finished, so a rerun redoes exactly
     # the unfinished ones
     p.set_defaults(func=_run, interrupted="rerun the same command to resume")
+
+
+def _per_shard(value: str):
+    if value == "auto":
+        return value
+    try:
+        return int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer or 'auto', got {value!r}") from None
 
 
 def _renamed_scale(value: str):

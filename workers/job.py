@@ -44,8 +44,8 @@ from datagen.synth.config import FORCE_CLOSURE_SEEDS
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
 
-__all__ = ["EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
-           "shard_slices"]
+__all__ = ["AUTO", "EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
+           "shard_size", "shard_slices"]
 
 
 PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running shard's progress
@@ -73,6 +73,10 @@ EXECUTION_FIELDS = ("object_timeout_s", "cpus_per_shard", "gpus_per_shard")
 MAX_SEED = 2**62                        # shard k uses seed + k; int64 columns hold it
 MAX_GRASPS_PER_OBJECT = 10_000
 MAX_GRID_RESOLUTION = 256               # 256^3 float32 = 64 MiB per object
+AUTO = "auto"                           # objects_per_shard chosen at the job's creation (`shard_size`)
+PREFERRED_PER_SHARD = 2                 # 4 targets (2 objects x 2 scales) per synthesis: its cheapest batch
+MAX_AUTO_PER_SHARD = 4                  # at most this many objects in an automatically sized shard
+SINGLE_OBJECT_COST = 1.16               # synthesis cost per grasp of a 1-object shard (2 targets) over 2 objects'
 
 
 @dataclass(frozen=True)
@@ -93,7 +97,9 @@ class JobConfig(Config):
     hand: str = "shadow"                #: built-in hand name or hand spec YAML path
     tasks: tuple[str, ...] | str = ("force_closure",)  #: built-in task names or task YAML paths (one: a string)
     grasps_per_object: int = 8          #: per object and scale (1 to 10000)
-    objects_per_shard: int = 2
+    objects_per_shard: int | str = AUTO  #: objects per shard task, or "auto": chosen when the job is
+                                        #: created for its object count and the cluster's worker slots
+                                        #: (`shard_size`); job.json records the number chosen
     seed: int = 0                       #: base seed, 0 <= seed < 2**62; shard k synthesizes with seed + k
     grid_resolution: int = 48           #: GraspTarget SDF grid nodes per axis, 8 to 256 (64: ~25 s/object
                                         #: on one core, 48: ~10 s, 32: ~3 s); built once per object
@@ -133,7 +139,8 @@ class JobConfig(Config):
              f"grasps_per_object must be in 1..{MAX_GRASPS_PER_OBJECT}, got {self.grasps_per_object}")
         need(8 <= self.grid_resolution <= MAX_GRID_RESOLUTION,
              f"grid_resolution must be in 8..{MAX_GRID_RESOLUTION}, got {self.grid_resolution}")
-        need(self.objects_per_shard >= 1, f"objects_per_shard must be >= 1, got {self.objects_per_shard}")
+        need(self.objects_per_shard == AUTO or (isinstance(self.objects_per_shard, int) and self.objects_per_shard >= 1),
+             f"objects_per_shard must be an int >= 1 or {AUTO!r}, got {self.objects_per_shard!r}")
         need(0 <= self.seed < MAX_SEED, f"seed must be an int in [0, 2**62), got {self.seed}")
         need(self.object_timeout_s > 0, f"object_timeout_s must be > 0 seconds, got {self.object_timeout_s}")
         need(self.cpus_per_shard > 0 and self.gpus_per_shard >= 0, "cpus_per_shard must be > 0, gpus_per_shard >= 0")
@@ -332,7 +339,11 @@ class JobDir:
 
     def init(self, cfg: JobConfig) -> bool:
         """Write job.json, or check that the existing one has the same config hash.
-        Returns True when resuming an existing job."""
+        Returns True when resuming an existing job. ``objects_per_shard`` must be a number here
+        (``run_job`` resolves "auto" first): job.json records the shard layout."""
+        if cfg.objects_per_shard == AUTO:
+            raise JobError(f"job {self.path}: objects_per_shard 'auto' must be resolved to a number before the "
+                           "job is created (workers.run.run_job does it; or pass a number)")
         p = self.path / JOB_JSON
         if p.is_file():
             old = json.loads(p.read_text())
@@ -375,7 +386,35 @@ class JobDir:
         atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
 
 
+def shard_size(n_objects: int, workers: int) -> int:
+    """Objects per shard for ``n_objects`` on ``workers`` shard slots (``objects_per_shard: auto``).
+
+    Ray hands the shards, in order, to the first free slot. With ``p`` objects per shard there
+    are F full shards and maybe a last, shorter one of r objects; the full ones end after
+    ceil(F / workers) x p object times, and the short one starts on the first slot to finish its
+    floor(F / workers) full shards. The size with the shortest job wins (up to
+    ``MAX_AUTO_PER_SHARD``), a 1-object shard's time weighted by its dearer synthesis
+    (``SINGLE_OBJECT_COST``: 2 targets per batch against 4, benchmarks/results/synth.md); ties go to
+    the size nearest ``PREFERRED_PER_SHARD``, then the larger. The default job (6 objects) on 2
+    slots: 3 per shard (2 per shard makes 3 shards and leaves one slot idle for a third of the
+    job); on 16 slots: 1; 5000 objects on 2: 2."""
+    if n_objects < 1 or workers < 1:
+        raise JobError(f"shard_size needs n_objects >= 1 and workers >= 1, got {n_objects}, {workers}")
+
+    def estimate(p: int) -> float:
+        full, rest = divmod(n_objects, p)
+        span = -(-full // workers) * p
+        if rest:
+            span = max(span, (full // workers) * p + rest)
+        return span * (SINGLE_OBJECT_COST if p == 1 else 1.0)
+
+    sizes = range(1, min(MAX_AUTO_PER_SHARD, n_objects) + 1)
+    return min(sizes, key=lambda p: (round(estimate(p), 9), abs(p - PREFERRED_PER_SHARD), -p))
+
+
 def shard_slices(n_objects: int, per_shard: int) -> list[tuple[int, int]]:
     """[start, stop) object ranges of the shards."""
+    if isinstance(per_shard, bool) or not isinstance(per_shard, int) or per_shard < 1:
+        raise JobError(f"shard_slices needs a number of objects per shard >= 1, got {per_shard!r}")
     return [(a, min(a + per_shard, n_objects)) for a in range(0, n_objects, per_shard)]
 

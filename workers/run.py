@@ -12,6 +12,7 @@ node needs this package installed.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -26,11 +27,13 @@ import pyarrow.parquet as pq
 
 from schemas import arrow_schema
 
-from .job import JobConfig, JobDir, JobError, code_version, package_versions, shard_slices
+from datagen.io.layout import JOB_JSON
+
+from .job import AUTO, JobConfig, JobDir, JobError, code_version, package_versions, shard_size, shard_slices
 from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
-           "MAX_RAY_TEMP_LEN", "start_local_ray"]
+           "MAX_RAY_TEMP_LEN", "start_local_ray", "worker_slots"]
 
 MAX_RAY_TEMP_LEN = 40
 LOOPBACK = "127.0.0.1"  # the local cluster's node address: Ray then listens on loopback only
@@ -177,7 +180,9 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         job.lock()
     except OSError as exc:
         raise JobError(f"--out {job.path}: cannot create the job directory: {exc.strerror}") from None
+    connected = False
     try:
+        cfg, connected = _resolve_layout(cfg, job, address, num_cpus)
         resumed = job.init(cfg)
         doc = job.read_job()
         try:
@@ -210,7 +215,48 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         status["shard_errors"] = errors
         return status
     finally:
+        if connected:
+            ray.shutdown()
         job.unlock()
+
+
+def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> tuple[int, bool]:
+    """(shard tasks that can run at once, whether this connected to a Ray cluster to count them).
+
+    Local: ``num_cpus`` (or every core) over ``cpus_per_shard``. A cluster (``address`` or
+    $RAY_ADDRESS, not "local"): its CPUs over ``cpus_per_shard``, and its GPUs over
+    ``gpus_per_shard`` when it has GPUs (the scarcer of the two), as Ray reports them now."""
+    import ray
+
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    connected = False
+    if address and address != "local":
+        if not ray.is_initialized():
+            ray.init(address=address, log_to_driver=False)
+            connected = True
+        res = ray.cluster_resources()
+        slots = res.get("CPU", 1.0) / cfg.cpus_per_shard
+        if res.get("GPU", 0) > 0 and cfg.gpus_per_shard > 0:
+            slots = min(slots, res["GPU"] / cfg.gpus_per_shard)
+    else:
+        slots = (num_cpus or os.cpu_count() or 1) / cfg.cpus_per_shard
+    return max(1, int(slots + 1e-9)), connected
+
+
+def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: int | None) -> tuple[JobConfig, bool]:
+    """``cfg`` with ``objects_per_shard: auto`` replaced by a number: the one job.json recorded
+    when the job was created (a resumed job keeps its shards whatever runs it now), else
+    `shard_size` of the object count and the worker slots (`worker_slots`). Returns the config and
+    whether this connected to a cluster to count its slots."""
+    if cfg.objects_per_shard != AUTO:
+        return cfg, False
+    if (job.path / JOB_JSON).is_file():
+        stored = job.read_job().get("config", {}).get("objects_per_shard")
+        if isinstance(stored, int) and not isinstance(stored, bool) and stored >= 1:
+            return dataclasses.replace(cfg, objects_per_shard=stored), False
+        return cfg, False  # not a job of this code: JobDir.init names the difference
+    slots, connected = worker_slots(cfg, address, num_cpus)
+    return dataclasses.replace(cfg, objects_per_shard=shard_size(cfg.count, slots)), connected
 
 
 def _discard_new_job(job: JobDir, remove_dir: bool) -> None:

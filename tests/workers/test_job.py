@@ -6,7 +6,10 @@ import json
 
 import pytest
 
-from workers.job import JobConfig, JobDir, JobError, shard_slices
+import heapq
+
+from workers.job import AUTO, SINGLE_OBJECT_COST, JobConfig, JobDir, JobError, shard_size, shard_slices
+from workers.run import _resolve_layout, worker_slots
 
 from .conftest import tiny_config
 
@@ -60,3 +63,46 @@ def test_shard_slices_cover_every_object_once():
         covered = [i for a, b in shard_slices(n, k) for i in range(a, b)]
         assert covered == list(range(n))
         assert all(b - a <= k for a, b in shard_slices(n, k))
+
+
+def _list_schedule_makespan(n: int, per_shard: int, workers: int) -> float:
+    """Makespan of the shards handed out in order to the first free worker (as Ray does), each
+    lasting its objects x the per-object cost (a 1-object shard's dearer synthesis included)."""
+    free = [0.0] * workers
+    for a, b in shard_slices(n, per_shard):
+        t = heapq.heappop(free)
+        heapq.heappush(free, t + (b - a) * (SINGLE_OBJECT_COST if per_shard == 1 else 1.0))
+    return max(free)
+
+
+def test_shard_size_fills_the_workers():
+    # hand-worked: 6 objects on 2 slots -> 2 shards of 3 (2 per shard leaves a slot idle for the
+    # third shard); on 16 slots one per shard; a long job keeps the preferred 2
+    assert [shard_size(6, 2), shard_size(6, 16), shard_size(5000, 2), shard_size(1, 8), shard_size(3, 2)] == [3, 1, 2, 1, 2]
+    for n in range(1, 41):
+        for w in (1, 2, 3, 4, 8, 16):
+            p = shard_size(n, w)
+            best = min(_list_schedule_makespan(n, k, w) for k in range(1, min(4, n) + 1))
+            assert _list_schedule_makespan(n, p, w) == pytest.approx(best), (n, w, p)
+    with pytest.raises(JobError, match="workers >= 1"):
+        shard_size(6, 0)
+
+
+def test_auto_layout_is_chosen_once_and_kept_on_resume(tmp_path):
+    cfg = tiny_config("procedural", count=6, objects_per_shard=AUTO)
+    assert worker_slots(cfg, None, 2) == (2, False)
+    assert worker_slots(JobConfig(**{**cfg.to_dict(), "cpus_per_shard": 2.0}), None, 8) == (4, False)
+    job = JobDir(tmp_path / "job")
+    with pytest.raises(JobError, match="'auto' must be resolved"):
+        job.init(cfg)
+    resolved, connected = _resolve_layout(cfg, job, None, 2)
+    assert (resolved.objects_per_shard, connected) == (3, False)
+    assert job.init(resolved) is False
+    assert json.loads((job.path / "job.json").read_text())["config"]["objects_per_shard"] == 3
+    # resumed on a machine with more cores: the recorded layout, not a new one
+    again, _ = _resolve_layout(cfg, job, None, 16)
+    assert again.objects_per_shard == 3 and job.init(again) is True
+    with pytest.raises(JobError, match=r"different job.*'objects_per_shard'"):
+        job.init(JobConfig(**{**cfg.to_dict(), "objects_per_shard": 2}))
+    with pytest.raises(JobError, match="objects_per_shard"):
+        JobConfig(objects_per_shard="many")
