@@ -229,12 +229,19 @@ class HandModel:
 
     @staticmethod
     def _apply(T: torch.Tensor, index: torch.Tensor, local: torch.Tensor, direction: bool = False) -> torch.Tensor:
-        # Gather only the 3 x 4 upper block: (..., N, 3, 4). Slicing a per-point (..., N, 4, 4)
-        # gather instead made autograd allocate and zero-fill full-size gradients for each slice
-        # (the same values; ~1/3 of this function's forward + backward time at 256 poses).
-        Ti = T[..., :3, :].index_select(-3, index)
-        out = (Ti[..., :3] @ local[..., None]).squeeze(-1)
-        return out if direction else out + Ti[..., 3]
+        # R @ p + t written out column by column: each column of the links' 3 x 4 blocks,
+        # (..., L, 3), is gathered per point, (..., N, 3), and scaled by the point's coordinate.
+        # The same arithmetic as the batched 3 x 3 @ 3 x 1 matmul (identical values), without one
+        # tiny GEMM per point and pose, and with every gradient scattered back at link size: slicing
+        # a gathered (..., N, 3, 4) tensor instead made autograd zero-fill a full-size gradient per
+        # slice (Shadow, 512 poses: 4 fills of 10 MB per iteration, the largest op of synthesis).
+        T3 = T[..., :3, :]
+
+        def column(j: int) -> torch.Tensor:
+            return T3[..., j].index_select(-2, index)
+
+        out = column(0) * local[:, 0:1] + column(1) * local[:, 1:2] + column(2) * local[:, 2:3]
+        return out if direction else out + column(3)
 
     def spheres(self, root_pose: torch.Tensor, joints: torch.Tensor,
                 transforms: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
