@@ -9,8 +9,8 @@ the others arrive (tasks.md, session 10).
 
 :func:`touch_grasp` measures each task fingertip's real gap -- the smallest exact object distance
 over points on its link's collision surface -- and moves every fingertip in along its contact
-normal by that gap (damped least squares through the fingertip Jacobians), so that all of them
-reach the surface at the end of the closing.
+normal by that gap (damped least squares through the fingertip Jacobians, re-measured and
+corrected over a few steps), so that all of them reach the surface at the end of the closing.
 """
 
 from __future__ import annotations
@@ -21,9 +21,10 @@ import torch
 from datagen.hands.geometry import link_shapes, sample_link_surface
 from datagen.synth.self_collision import farthest_point_seeds
 
-__all__ = ["TIP_SURFACE_POINTS", "real_tip_gaps", "tip_surface_points", "touch_grasp"]
+__all__ = ["TIP_SURFACE_POINTS", "TOUCH_STEPS", "real_tip_gaps", "tip_surface_points", "touch_grasp"]
 
 TIP_SURFACE_POINTS = 1024  #: points per fingertip link (farthest-point subsample of 20k surface samples, seeded)
+TOUCH_STEPS = 3  #: re-measured steps of the move (one linearized step overshot a 2.3 mm gap by 0.9 mm)
 
 
 def tip_surface_points(hand) -> torch.Tensor:
@@ -60,13 +61,26 @@ def real_tip_gaps(hand, targets, object_index: torch.Tensor, root_pose: torch.Te
 
 def touch_grasp(hand, targets, object_index: torch.Tensor, root_pose: torch.Tensor, joints: torch.Tensor,
                 tip_index: torch.Tensor, tip_spheres: torch.Tensor, inward_normals: torch.Tensor,
-                movable: torch.Tensor, damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+                movable: torch.Tensor, damping_m: float = 0.01,
+                steps: int = TOUCH_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
     """``(joints (B, J), gaps (B, F'))``: the grasp with every task fingertip moved in along its
     contact normal ``inward_normals (B, F', 3)`` by its real gap (gaps below 0 are left alone),
-    coupled and within the joint limits; and the gaps measured before the move (m)."""
+    coupled and within the joint limits; and the gaps measured before the move (m).
+
+    One damped least-squares step through the fingertip Jacobians is a linearization: the
+    fingertip turns as its joints move, so the pad point nearest the surface changes, and a 2 mm
+    gap can end 0.9 mm deep. So the move is ``steps`` steps, each re-measuring the real gaps and
+    moving the remainder to the goal (0, or the gap itself where it started below 0), in or out."""
     from datagen.synth.squeeze import _damped_step, tip_jacobian
 
     gaps = real_tip_gaps(hand, targets, object_index, root_pose, joints, tip_index)
-    J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
-    dq = _damped_step(J, gaps.clamp_min(0)[..., None] * inward_normals, damping_m)
-    return hand.clamp_joints(hand.apply_couplings(joints + dq)), gaps
+    goal = gaps.clamp_max(0)
+    mask = movable.to(joints.dtype)
+    now = gaps
+    for k in range(steps):
+        J = tip_jacobian(hand, root_pose, joints, tip_spheres) * mask
+        joints = hand.clamp_joints(hand.apply_couplings(joints + _damped_step(J, (now - goal)[..., None] * inward_normals,
+                                                                             damping_m)))
+        if k + 1 < steps:
+            now = real_tip_gaps(hand, targets, object_index, root_pose, joints, tip_index)
+    return joints, gaps
