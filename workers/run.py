@@ -254,7 +254,8 @@ def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: 
         stored = job.read_job().get("config", {}).get("objects_per_shard")
         if isinstance(stored, int) and not isinstance(stored, bool) and stored >= 1:
             return dataclasses.replace(cfg, objects_per_shard=stored), False
-        return cfg, False  # not a job of this code: JobDir.init names the difference
+        # no number recorded (not a job of this code): resolve as for a new job; JobDir.init then
+        # names whatever differs
     slots, connected = worker_slots(cfg, address, num_cpus)
     return dataclasses.replace(cfg, objects_per_shard=shard_size(cfg.count, slots)), connected
 
