@@ -146,7 +146,7 @@ class Evaluator:
     def scene(self, pieces: ObjectPieces, task: TaskTest | None = None) -> tuple[Scene, list[mujoco.MjData]]:
         """The cached scene of ``pieces`` (object joint from ``task``) and its scratch MjData."""
         joint = None if task is None or task.joint == "free" else (task.joint, task.axis, task.anchor, task.limits)
-        key = (pieces.paths, pieces.volumes, pieces.scale, joint)
+        key = (pieces.paths, pieces.volumes, pieces.scale, joint, () if task is None else task.scenery)
         if key in self._scenes:
             self._scenes.move_to_end(key)
             return self._scenes[key]

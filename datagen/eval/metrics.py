@@ -5,7 +5,8 @@ Distances are signed, metres (negative = penetration depth). Shapes: G hand coll
 F fingertips, m contacts.
 
 * hand-object distance per hand geom, with the nearest points on both sides;
-* penetration = max depth over hand-object geom pairs (0 when nothing overlaps);
+* penetration = max depth over hand-object geom pairs and hand-scenery geom pairs (a task's
+  static door, housing or cabinet; 0 when nothing overlaps);
 * self penetration = max depth over pairs of hand collision geoms on bodies that are neither
   the same nor parent and child (MuJoCo's own exclusion; the hand's <exclude> pairs too), and
   that do not already overlap at the hand's open pose (structural overlaps of the collision
@@ -25,7 +26,7 @@ import numpy as np
 from .scene import Scene
 
 __all__ = ["StaticMetrics", "set_static_pose", "hand_object_distances", "self_penetration", "static_metrics",
-           "self_pairs"]
+           "self_pairs", "scenery_penetration"]
 
 
 def set_static_pose(scene: Scene, data: mujoco.MjData, row: np.ndarray) -> None:
@@ -66,6 +67,18 @@ def hand_object_distances(scene: Scene, data: mujoco.MjData, distmax: float):
                 dist[i] = dd
                 p_hand[i], p_obj[i] = fromto[:3], fromto[3:]
     return dist, p_hand, p_obj
+
+
+def scenery_penetration(scene: Scene, data: mujoco.MjData) -> float:
+    """Max depth (m, >= 0) of the hand's collision geoms inside the scene's static scenery."""
+    m = scene.model
+    depth = 0.0
+    if len(scene.scenery_geoms) == 0:
+        return depth
+    for g in scene.hand_geoms:
+        for e in _bound_filter(m, data, int(g), scene.scenery_geoms, 0.0):
+            depth = max(depth, -mujoco.mj_geomDistance(m, data, int(g), int(e), 0.0, None))
+    return depth
 
 
 def self_pairs(scene: Scene) -> np.ndarray:
@@ -149,7 +162,7 @@ def static_metrics(scene: Scene, data: mujoco.MjData, row: np.ndarray, *, touch_
         pts.append(p_obj[i])
         nrm.append(v / n)
     return StaticMetrics(
-        penetration=float(max(0.0, -dist.min())) if len(dist) else 0.0,
+        penetration=max(float(max(0.0, -dist.min())) if len(dist) else 0.0, scenery_penetration(scene, data)),
         self_penetration=self_penetration(scene, data) if with_self else 0.0,
         min_distance=float(dist.min()) if len(dist) else float(distmax),
         finger_distance=finger,

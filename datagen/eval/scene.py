@@ -6,7 +6,9 @@ is driven by moving the mocap body and by its position actuators (gains set from
 The object is one body of the convex pieces at ``scale`` metres per normalized unit, total
 mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
 hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's
-condim, friction and margin; hand geoms get the hand solimp/solref.
+condim, friction and margin; hand geoms get the hand solimp/solref. A task test's scenery (static
+boxes round a mounted part: door, panel, housing, cabinet) is a static body ``scenery``; its
+contacts with the object are excluded (the part moves inside it), the hand collides with it.
 
 Rooting (``EvalConfig.hand_root``): ``"spec"`` attaches the hand from its spec's root body (for
 the Shadow hands: the forearm, its 3-4 kg driven through the two wrist joints by the actuators).
@@ -97,6 +99,7 @@ class Scene:
     hand_geoms: np.ndarray           # (G,) hand collision geom ids
     hand_geom_link: np.ndarray       # (G,) index into hand.link_names of each hand geom's body
     object_geoms: np.ndarray         # (P,) object geom ids
+    scenery_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (E,) static scenery geom ids
     self_pairs: np.ndarray | None = None  # (S, 2) hand geom pairs of the self-penetration metric (lazy)
     # hand_root "palm": the joints of the row the scene simulates (J',) (None: all J), and the
     # kinematics of the palm relative to the row's root (see ``root_target``)
@@ -212,6 +215,15 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
             j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
             j.range = [-_NO_STOP if task.limits[0] is None else task.limits[0],
                        _NO_STOP if task.limits[1] is None else task.limits[1]]
+    scenery = () if task is None else task.scenery
+    if scenery:  # static boxes round a mounted part: they stop the hand, not the part (it moves inside them)
+        env = spec.worldbody.add_body(name="scenery")
+        for i, (lo, hi) in enumerate(scenery):
+            lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+            g = env.add_geom(name=f"scenery_geom_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=list((lo + hi) / 2),
+                             size=list((hi - lo) / 2), rgba=[0.6, 0.6, 0.65, 0.5])
+            _set_contact(g, cfg, hand=False)
+        spec.add_exclude(bodyname1="object", bodyname2="scenery")
     total = sum(pieces.volumes)
     s = pieces.scale
     for i, (path, vol) in enumerate(zip(pieces.paths, pieces.volumes)):
@@ -317,6 +329,8 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str, palm: 
             hand_geoms.append(g)
             hand_link.append(link_index[b])
     obj_geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] == obody])
+    env = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "scenery")
+    env_geoms = np.array([g for g in range(model.ngeom) if env >= 0 and model.geom_bodyid[g] == env], dtype=np.int64)
     A = hand.ctrl_matrix.detach().cpu().double().numpy()[kept]
     if palm is not None and np.any(A[:, palm.held_index]):
         raise EvalError(f"hand {hand.name!r}", "an actuator couples a wrist joint to a finger; hand_root: palm cannot hold it")
@@ -328,4 +342,5 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str, palm: 
                  object_body=obody, mocap=int(model.body_mocapid[model.body("hand_mocap").id]),
                  actuators=acts, ctrl_matrix=A, ctrl_range=model.actuator_ctrlrange[acts].copy(),
                  hand_geoms=np.array(hand_geoms), hand_geom_link=np.array(hand_link), object_geoms=obj_geoms,
+                 scenery_geoms=env_geoms,
                  sim_joints=None if palm is None else sim, palm_kinematics=palm)

@@ -14,7 +14,15 @@ the object's exact convex decomposition (no CoACD needed), in the same frame.
 
 Orientation: gravity is off in the evaluation, so every object is posed for a hand that comes
 from above (+z, palm down): turning axes, pushing and pulling directions are the z axis; lifting
-is +z. No static environment (door leaf, cabinet, table) is modelled: only the moving part.
+is +z.
+
+Scenery: the static surroundings a mounted part comes with, as axis-aligned boxes in the same
+frame (``TaskObject.scenery_m``): the closed door (leaf and frame) behind the lever handle, the
+panel behind each knob, the button's housing (a bezel round the cap, 5 mm of it showing), the
+cabinet round the drawer front (carcass behind it, neighbouring fronts and stiles 3 mm away). A
+hand must not pass through them (synthesis penetration, evaluation contacts); the moving part
+does not collide with them (it slides or turns inside them). The free objects (handbag, plate,
+lid, key, plug) have none.
 
 Determinism: no randomness; OBJ text with fixed formatting (same bytes on every run).
 """
@@ -64,6 +72,7 @@ class TaskObject:
     scale_m: float
     points_m: dict
     description: str
+    scenery_m: tuple = ()  #: static boxes ``((lo (3,), hi (3,)), ...)`` metres, same frame (module docstring)
 
 
 # ----------------------------------------------------------------------------- primitives
@@ -97,7 +106,7 @@ def _lever_handle():
     parts = [_cyl(0.027, 0.0, 0.010), _cyl(0.009, 0.009, 0.058),
              _hull(_cyl(0.011, 0.045, 0.063), _cyl(0.009, 0.046, 0.062, x=0.115))]
     return parts, VirtualJoint("hinge", (0, 0, 1), (0, 0, 0)), \
-        {"pivot": (0, 0, 0), "grip": (0.075, 0, 0.054)}, "door lever handle on its pivot (door leaf not modelled)"
+        {"pivot": (0, 0, 0), "grip": (0.075, 0, 0.054)}, "door lever handle on its pivot, on a closed door"
 
 
 def _knob2():
@@ -142,10 +151,10 @@ def _plate():
 
 def _button():
     """Push button cap: r 11 mm, 12 mm tall, on a 14 mm collar; pressed along -z, 4 mm of travel
-    to its end stop (the housing's floor; the housing's walls are not modelled)."""
+    to its end stop (the housing's floor; the housing is scenery)."""
     parts = [_cyl(0.014, 0.0, 0.003), _cyl(0.011, 0.002, 0.011), _cyl(0.009, 0.010, 0.012)]
     return parts, VirtualJoint("slide", (0, 0, 1), (0, 0, 0), limits=(-0.004, None)), {"top": (0, 0, 0.012)}, \
-        "push button cap, 4 mm travel (its housing's walls not modelled)"
+        "push button cap in its housing, 4 mm travel"
 
 
 def _drawer():
@@ -155,7 +164,7 @@ def _drawer():
              _cyl(0.006, 0.019, 0.075, x=-0.055), _cyl(0.006, 0.019, 0.075, x=0.055),
              _hull(_rod((-0.065, 0, 0.066), (0.065, 0, 0.066), 0.006), _rod((-0.065, 0, 0.081), (0.065, 0, 0.081), 0.006))]
     return parts, VirtualJoint("slide", (0, 0, 1), (0, 0, 0)), {"bar": (0, 0, 0.0735)}, \
-        "drawer front with a bar pull (the drawer box and cabinet not modelled)"
+        "drawer front with a bar pull, in its cabinet"
 
 
 def _jar_lid():
@@ -184,6 +193,33 @@ def _usb_a():
              _hull(_box((-0.0075, -0.004, 0.012), (0.0075, 0.004, 0.014)), _box((-0.006, -0.0035, 0.040), (0.006, 0.0035, 0.042))),
              _cyl(0.0025, 0.041, 0.052)]
     return parts, VirtualJoint("free"), {"body": (0, 0, 0.027)}, "USB-A plug, connector down"
+
+
+def _slab(half_xy: float, z0: float, z1: float):
+    return (-half_xy, -half_xy, z0), (half_xy, half_xy, z1)
+
+
+def _frame(hole_x: float, hole_y: float, outer: float, z0: float, z1: float):
+    """Four boxes round a rectangular hole |x| < hole_x, |y| < hole_y, out to |x|, |y| < outer."""
+    return [((hole_x, -outer, z0), (outer, outer, z1)), ((-outer, -outer, z0), (-hole_x, outer, z1)),
+            ((-hole_x, hole_y, z0), (hole_x, outer, z1)), ((-hole_x, -outer, z0), (hole_x, -hole_y, z1))]
+
+
+# Static surroundings per object, boxes (lo, hi) in the builder's frame (metres).
+_SCENERY = {
+    # the closed door, 40 mm thick, in its wall, the rose mounted on its face (z = 0); 1.2 m square,
+    # so that a forearm (35 cm behind the Shadow palm) cannot reach round it
+    "lever_handle": [_slab(0.60, -0.040, 0.0)],
+    # the panel (stove front, cabinet door) the knob's flange sits on
+    "knob2": [_slab(0.40, -0.030, 0.0)],
+    "knob3": [_slab(0.40, -0.030, 0.0)],
+    # housing in a control panel: a bezel at z = 7 mm with a 25 mm square opening round the 22 mm
+    # cap (its top at 12 mm: 5 mm show), over the collar, and the floor under the cap's 4 mm of travel
+    "button": [_slab(0.40, -0.040, -0.005)] + _frame(0.0125, 0.0125, 0.40, -0.005, 0.007),
+    # overlay drawer: carcass behind the front (z < 0), the fronts above and below and the side
+    # stiles flush with it, 3 mm gaps; a 1.2 m wide cabinet face
+    "drawer": [_slab(0.60, -0.40, 0.0)] + _frame(0.183, 0.073, 0.60, 0.0, 0.02),
+}
 
 
 _BUILDERS = {
@@ -222,7 +258,8 @@ def build(name: str) -> TaskObject:
     cparts = tuple((pv - centre, pf) for pv, pf in (_mesh_arrays(p) for p in parts))
     scale = float(np.linalg.norm(hi - lo) / 2)
     jnt = VirtualJoint(joint.kind, tuple(float(x) for x in joint.axis), shift(joint.anchor_m), joint.limits)
-    return TaskObject(name, mesh, cparts, jnt, scale, {k: shift(p) for k, p in points.items()}, desc)
+    scenery = tuple((shift(lo), shift(hi)) for lo, hi in _SCENERY.get(name, ()))
+    return TaskObject(name, mesh, cparts, jnt, scale, {k: shift(p) for k, p in points.items()}, desc, scenery)
 
 
 def obj_bytes(name: str) -> bytes:

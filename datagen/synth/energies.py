@@ -8,7 +8,8 @@
   sphere (the distal-link collision sphere nearest the pad point) and the object: the same
   sphere the penetration term pushes out, so the two terms agree on where contact is;
 * ``E_pen``: ``sum_s max(0, r_s - d(c_s))^2`` (m^2), hand collision spheres against the object's
-  SDF grid (exact mesh distances are kept for the few fingertip contacts);
+  SDF grid (exact mesh distances are kept for the few fingertip contacts), plus the same against
+  a mounted task object's static scenery (`datagen.synth.scenery`);
 * ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
 * ``E_joint``: summed joint-limit violation (rad).
 
@@ -25,6 +26,7 @@ from dataclasses import dataclass
 import torch
 
 from datagen.synth.penetration import sphere_penetration
+from datagen.synth.scenery import Scenery
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
 from datagen.synth.stacked import grid_query
 from datagen.wrench import task_energy
@@ -103,14 +105,16 @@ def contact_sphere_index(hand) -> torch.Tensor:
 
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
-                      self_collision: bool = True, self_pairs: SelfPairList | None = None) -> HandObjectState:
+                      self_collision: bool = True, self_pairs: SelfPairList | None = None,
+                      scenery: Scenery | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
     picks the exact mesh SDF (default) or the SDF grid for the contacts. ``sphere_margin`` (m) is
     how far collision spheres may sink into the object before they count as penetrating.
     ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0;
-    ``self_pairs`` reuses its pair lists across calls on the same batch (an optimizer run).
+    ``self_pairs`` reuses its pair lists across calls on the same batch (an optimizer run);
+    ``scenery``: static boxes the spheres must also stay out of (penetration terms).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -119,11 +123,16 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
     pen = sphere_penetration(targets, object_index, centres, radii - sphere_margin)  # (B, S) m
+    pen_sq = (pen * pen).sum(-1)
+    if scenery is not None:
+        env = scenery.penetration(object_index, centres, radii - sphere_margin)  # (B, S) m
+        pen_sq = pen_sq + (env * env).sum(-1)
+        pen = torch.maximum(pen, env)
     lo, hi = hand.joint_lower, hand.joint_upper
     violation = (torch.relu(joints - hi) + torch.relu(lo - joints)).sum(-1)
     return HandObjectState(
         tips=tips, tip_distance=d_tip, contact_points=closest, contact_normals=-outward,
-        sphere_penetration=(pen * pen).sum(-1), max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
+        sphere_penetration=pen_sq, max_penetration=pen.amax(-1) if pen.shape[-1] else pen.sum(-1),
         self_penetration=(self_overlap_energy(hand, centres_all, radii_all, self_pairs, T[:, hand.palm_link])
                           if self_collision
                           else centres_all.new_zeros(centres_all.shape[0])),

@@ -11,6 +11,10 @@ midpoint of the two farthest apart, at the initial joints) that lands on ``targe
 by ``distance_m`` against the approach: a precision grasp's fingertips start around the part
 they pinch, wherever the hand's palm frame lies; there ``thumb`` gives the direction from the other
 task fingertips to the thumb tip (the pinch axis), not the palm's thumb axis.
+With ``scenery`` (static boxes round a mounted task object), ``surround`` draws only hull points
+whose palm origins, at both ends of ``distance_m``, stay `SCENERY_CLEARANCE_M` clear of every box,
+and a start with a collision sphere in a box is drawn again: no hand starts behind a door or with
+its forearm in a cabinet.
 Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
 way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
 is drawn from the passed generator.
@@ -24,7 +28,10 @@ import torch
 
 from datagen.synth.rotation import matrix_to_quat
 
-__all__ = ["curled_joints", "fingertip_centre", "initial_poses", "root_from_palm"]
+__all__ = ["SCENERY_CLEARANCE_M", "SCENERY_REDRAWS", "curled_joints", "fingertip_centre", "initial_poses", "root_from_palm"]
+
+SCENERY_CLEARANCE_M = 0.01  #: m, how far outside the scenery a ``surround`` palm origin starts
+SCENERY_REDRAWS = 64  #: times a start with the hand in the scenery is drawn again (82% of generic lever starts are)
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
@@ -123,9 +130,34 @@ def _pinch_vector(hand, joints: torch.Tensor, tip_index) -> torch.Tensor | None:
 
 
 def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator: torch.Generator,
-                  tip_index=None):
+                  tip_index=None, scenery=None):
     """``(root_pose (B, 7), joints (B, J))`` for grasps on ``targets[object_index]``;
-    ``tip_index``: the task's fingertips (for ``aim: fingertips``; None: all)."""
+    ``tip_index``: the task's fingertips (for ``aim: fingertips``; None: all); ``scenery``: a
+    `datagen.synth.scenery.Scenery` the hand starts clear of (None: none): ``surround`` palms
+    come from hull points with room for them, and a pose with any collision sphere inside the
+    scenery (a forearm through the door) is drawn again, up to `SCENERY_REDRAWS` times (the
+    least deep of its draws is kept)."""
+    root, joints = _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery)
+    if scenery is None:
+        return root, joints
+
+    def depth(r, j):
+        centres, radii = hand.spheres(r, j)
+        return scenery.penetration(object_index, centres, radii).amax(-1)
+
+    d = depth(root, joints)
+    for _ in range(SCENERY_REDRAWS):
+        if not bool((d > 0).any()):
+            break
+        r2, j2 = _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery)
+        better = depth(r2, j2) < d
+        root, joints = torch.where(better[:, None], r2, root), torch.where(better[:, None], j2, joints)
+        d = torch.minimum(d, depth(r2, j2))
+    return root, joints
+
+
+def _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery):
+    """One draw of `initial_poses` for every sample (no redraws)."""
     B = object_index.shape[0]
     dt, dev = hand.dtype, hand.device
 
@@ -140,9 +172,17 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
         if sel.numel() == 0:
             continue
         if init_cfg.kind == "surround":
-            idx = (rand(sel.numel()) * target.hull_points.shape[0]).long().clamp_max(target.hull_points.shape[0] - 1)
-            origin[sel] = target.hull_points[idx].to(dev, dt)
-            normal[sel] = target.hull_normals[idx].to(dev, dt)
+            pts, nrm = target.hull_points.to(dev, dt), target.hull_normals.to(dev, dt)
+            if scenery is not None and bool(scenery.on_target[k]):
+                lo, hi = init_cfg.distance_m
+                ok = scenery.clear_of(pts + lo * nrm, SCENERY_CLEARANCE_M) & scenery.clear_of(pts + hi * nrm, SCENERY_CLEARANCE_M)
+                if not bool(ok.any()):
+                    raise ValueError(f"{target.object_id}: no convex-hull point has room for a palm outside the "
+                                     f"task's scenery (distance_m {init_cfg.distance_m})")
+                pts, nrm = pts[ok], nrm[ok]
+            idx = (rand(sel.numel()) * pts.shape[0]).long().clamp_max(pts.shape[0] - 1)
+            origin[sel] = pts[idx]
+            normal[sel] = nrm[idx]
         else:  # above / approach: palm on the hull's supporting plane facing -approach, aimed at target
             a = -1.0 * torch.tensor(init_cfg.approach if init_cfg.kind == "approach" else (0, 0, -1.0), dtype=dt, device=dev)
             n = _unit(a)

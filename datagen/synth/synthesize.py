@@ -13,7 +13,8 @@ object with balanced grip forces, and ``pregrasp`` = ``2 grasp - squeeze`` (by d
 ``cfg.squeeze_mode`` and :mod:`datagen.synth.squeeze`), pulled back towards the grasp where it
 would sink the hand deeper into the object than the grasp does;
 the task fingertips' contact points and inward normals; final energy terms; epsilon of those
-contacts; the initial pose (for rendering).
+contacts; the initial pose (for rendering). A mounted task object's scenery (door, panel, housing,
+cabinet: `datagen.synth.scenery`) is part of every penetration term and of the initial poses.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
+from datagen.synth.scenery import Scenery
 from datagen.synth.select import link_contacts, seed_scores, top_seeds
 from datagen.synth.self_collision import SelfPairList
 from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
@@ -117,7 +119,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     tip_spheres = contact_sphere_index(hand)[finger_index]
     S = cfg.seeds_per_grasp
     seed_index = object_index.repeat_interleave(S)  # (B S,) seeds of grasp b: rows b S .. b S + S - 1
-    root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index)
+    scenery = Scenery.for_task(task, targets, dev, dt)  # a mounted object's door, housing or cabinet
+    root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     joints = hand.apply_couplings(joints)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
 
@@ -128,7 +131,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
             jj = hand.apply_couplings(j)
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
-                                      self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs)
+                                      self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
+                                      scenery=scenery)
             terms = evaluate_state(state, cfg, task, directions)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
@@ -166,13 +170,13 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         grasp_j = hand.apply_couplings(x.joints)
         root_f = x.root_pose()
         state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
-                                  sphere_margin=cfg.sphere_margin_m)
+                                  sphere_margin=cfg.sphere_margin_m, scenery=scenery)
         if cfg.touch_real_gaps:  # the real fingertips onto the surface together (touch.py)
             tip_index = torch.as_tensor(finger_index, dtype=torch.long, device=dev)
             grasp_j, _ = touch_grasp(hand, targets, object_index, root_f, grasp_j, tip_index, tip_spheres,
                                      state.contact_normals, finger_joint_mask(hand))
             state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
-                                      sphere_margin=cfg.sphere_margin_m)
+                                      sphere_margin=cfg.sphere_margin_m, scenery=scenery)
         links = (link_contacts(hand, targets, object_index, root_f, grasp_j, cfg.seed_contact_gap_m)
                  if cfg.squeeze_mode == "hand" else None)
         pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
@@ -180,7 +184,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, object_index, root_f, j, tip_spheres,
-                                     self_collision=False).max_penetration
+                                     self_collision=False, scenery=scenery).max_penetration
 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,

@@ -6,6 +6,7 @@
     spec.for_hand("allegro")                # the task with its `hands:` entry for that hand applied
     SynthConfig.from_dict(spec.synth_settings({...}))  # its `synth:` block, the caller's settings on top
     task_test_from_spec(spec)               # TaskTest: the physical test (datagen.eval), None: six directions
+    task_scenery(spec)                      # static boxes round a mounted object (door, housing, cabinet)
     task_targets(spec, targets)             # the objects it runs on
 
 Modules: ``spec`` (TaskSpec, InitConfig, loading), ``evaluation`` (the ``eval`` block, TaskTest),
@@ -13,11 +14,13 @@ Modules: ``spec`` (TaskSpec, InitConfig, loading), ``evaluation`` (the ``eval`` 
 `datagen.objects.task_objects`.
 """
 
-from .evaluation import EVAL_KEYS, TaskTest, builtin_task_test, has_builtin_test, task_object, task_test_from_spec
+from .evaluation import (EVAL_KEYS, TaskTest, builtin_task_test, has_builtin_test, task_object, task_scenery,
+                         task_test_from_spec)
 from .pairing import task_object_id, task_targets
 from .spec import SPEC_DIR, HandOverride, InitConfig, TaskSpec, builtin_tasks, load_task
 
 __all__ = [
     "EVAL_KEYS", "SPEC_DIR", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_task_test", "builtin_tasks",
-    "has_builtin_test", "load_task", "task_object", "task_object_id", "task_targets", "task_test_from_spec",
+    "has_builtin_test", "load_task", "task_object", "task_object_id", "task_scenery", "task_targets",
+    "task_test_from_spec",
 ]

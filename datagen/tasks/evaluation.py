@@ -32,7 +32,7 @@ from datagen.errors import EvalError
 
 from .spec import TaskSpec, builtin_tasks, load_task
 
-__all__ = ["EVAL_KEYS", "JOINT_KINDS", "TaskTest", "builtin_task_test", "has_builtin_test", "task_object",
+__all__ = ["EVAL_KEYS", "JOINT_KINDS", "TaskTest", "builtin_task_test", "has_builtin_test", "task_object", "task_scenery",
            "task_test_from_spec"]
 
 JOINT_KINDS = ("free", "hinge", "slide")
@@ -69,7 +69,10 @@ class TaskTest(Config):
     object's initial pose (``measure_from: initial``, as the six-direction protocol) or from its
     pose once the hand has closed (``closed``: only the disturbance's effect counts, as in the
     paper's task test where the hand is fixed at the grasp); ``min_touching_links`` (None: the
-    config's) overrides the no-contact rule (a one-finger press touches one link).
+    config's) overrides the no-contact rule (a one-finger press touches one link). ``scenery``:
+    static boxes ``((lo, hi), ...)`` (metres, object frame) round a mounted part (a door, a
+    panel, a housing, a cabinet: the task object's ``scenery_m``): they collide with the hand,
+    not with the object, and a hand inside them counts as penetration.
     """
 
     config_error: ClassVar[type[EvalError]] = EvalError
@@ -86,6 +89,7 @@ class TaskTest(Config):
     max_rotation_deg: float | None = None
     min_touching_links: int | None = None
     measure_from: str = "initial"
+    scenery: tuple = ()
 
     def __post_init__(self) -> None:
         w = tuple(float(x) for x in self.w_t)
@@ -113,6 +117,16 @@ class TaskTest(Config):
             _check(v is None or (isinstance(v, (int, float)) and v > 0), f"TaskTest.{name}", f"must be > 0 or null, got {v!r}")
         _check(self.measure_from in ("initial", "closed"), "TaskTest.measure_from",
                f"must be 'initial' or 'closed', got {self.measure_from!r}")
+        boxes = []
+        for box in self.scenery or ():
+            try:
+                lo, hi = (tuple(float(x) for x in v) for v in box)
+                ok = len(lo) == len(hi) == 3 and all(math.isfinite(x) for x in lo + hi) and all(a < b for a, b in zip(lo, hi))
+            except (TypeError, ValueError):
+                ok = False
+            _check(ok, "TaskTest.scenery", f"each box must be (lo, hi), 3 finite numbers each, lo < hi; got {box!r}")
+            boxes.append((lo, hi))
+        object.__setattr__(self, "scenery", tuple(boxes))
         _check(self.min_touching_links is None or (isinstance(self.min_touching_links, int) and self.min_touching_links >= 0),
                "TaskTest.min_touching_links", f"must be an int >= 0 or null, got {self.min_touching_links!r}")
 
@@ -162,13 +176,24 @@ def task_test_from_spec(spec: TaskSpec, where: str | None = None) -> TaskTest | 
     if name is None:
         raise EvalError(f"{where}: eval.object", "a task test needs the object whose virtual joint it moves on",
                         f"one of {list(task_objects.TASK_OBJECTS)}")
-    joint = task_objects.build(name).joint
+    obj = task_objects.build(name)
+    joint = obj.joint
     kw = {k: block[k] for k in EVAL_KEYS[2:] if k in block and block[k] is not None}
     try:
         return TaskTest(w_t=tuple(spec.w_t), joint=joint.kind, axis=joint.axis, anchor=joint.anchor_m,
-                        limits=joint.limits, **kw)
+                        limits=joint.limits, scenery=obj.scenery_m, **kw)
     except EvalError as exc:
         raise EvalError(f"{where}: eval ({exc.thing})", exc.reason, exc.remedy) from None
+
+
+def task_scenery(spec: TaskSpec) -> tuple:
+    """The static boxes ``((lo (3,), hi (3,)), ...)`` (metres, object frame) the hand must stay out
+    of for ``spec``: its test's ``scenery`` (the task object's), () for a six-direction test or a
+    task bound to no object. Synthesis and evaluation read the same boxes."""
+    if task_object(spec) is None:
+        return ()
+    test = task_test_from_spec(spec)
+    return () if test is None else test.scenery
 
 
 @functools.lru_cache(maxsize=None)
