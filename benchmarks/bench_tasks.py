@@ -267,7 +267,8 @@ def task_definitions() -> list[str]:
         joint = j.kind if j.kind == "free" else f"{j.kind} {list(j.axis)} @ {list(j.anchor_m)}"
         if j.limits is not None:
             joint += ", stops " + " / ".join("none" if x is None else f"{x:+g}" for x in j.limits)
-        out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
+        scenery = f"; scenery: {len(obj.scenery_m)} boxes" if obj.scenery_m else ""
+        out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}{scenery}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
                    f"{', '.join(spec.fingers)} | {list(spec.init.approach)} / {list(spec.init.target_m)} | {dist} |")
     return out
 
@@ -278,7 +279,9 @@ def render(records: Path, machine: str) -> str:
                       key=lambda v: min(r["finished_at"] for r in allrecs if r.get("code_version", "-") == v))
     lines = ["# Task-oriented benchmark (paper Table II and its hyper-parameter table)", "",
              f"Machine: {machine}", "",
-             "Ten tasks on procedural objects with virtual joints (`datagen/objects/task_objects.py`), task specs "
+             "Ten tasks on procedural objects with virtual joints (`datagen/objects/task_objects.py`); the mounted ones "
+             "(lever, knobs, button, drawer) in their static scenery since `a8b9d26` (door, panel, housing, cabinet: "
+             "boxes the hand must stay out of, in synthesis and in MuJoCo; earlier versions had none), task specs "
              "`datagen/tasks/specs/<task>.yaml` (TWS, fingers, initial pose, and the `eval` block each task's test "
              "comes from). Success = MuJoCo task test: the disturbance -w_t (magnitudes per task in its YAML) on the "
              "object's virtual joint, object unmoved (per-task thresholds in the YAML); precision grasps: the "
