@@ -267,7 +267,8 @@ def task_definitions() -> list[str]:
         joint = j.kind if j.kind == "free" else f"{j.kind} {list(j.axis)} @ {list(j.anchor_m)}"
         if j.limits is not None:
             joint += ", stops " + " / ".join("none" if x is None else f"{x:+g}" for x in j.limits)
-        scenery = f"; scenery: {len(obj.scenery_m)} boxes" if obj.scenery_m else ""
+        n = len(obj.scenery_m)
+        scenery = f"; scenery: {n} box{'es' if n > 1 else ''}" if n else ""
         out.append(f"| {t} | {obj.name} ({obj.scale_m:.3f}{scenery}) | {joint} | {list(spec.w_t)} | {spec.gamma_deg:g} | "
                    f"{', '.join(spec.fingers)} | {list(spec.init.approach)} / {list(spec.init.target_m)} | {dist} |")
     return out
