@@ -123,12 +123,15 @@ def test_a_tasks_synth_block_lies_under_the_run_config():
     from datagen.tasks import load_task
 
     plate = load_task("lift_plate")
-    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 16}
+    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 16, "weights": {"distance": 1e5}}
     merged = SynthConfig().for_task(plate)
     assert merged.exact_contacts is True and merged.seeds_per_grasp == 16 and merged.iters == SynthConfig().iters
+    assert merged.weights == EnergyWeights(distance=1e5)
     mine = SynthConfig(seeds_per_grasp=2, iters=40, weights=EnergyWeights(task=0.0)).for_task(plate)
     assert (mine.seeds_per_grasp, mine.iters, mine.exact_contacts) == (2, 40, True)
-    assert mine.weights.task == 0.0 and mine.weights.distance == EnergyWeights().distance
+    # key by key: the run's task weight, the task's distance weight (the run left it at its default)
+    assert mine.weights.task == 0.0 and mine.weights.distance == 1e5
+    assert mine.weights.penetration == EnergyWeights().penetration
     fc = load_task("force_closure")
     cfg = SynthConfig(iters=7)
     assert not fc.synth and cfg.for_task(fc) is cfg
