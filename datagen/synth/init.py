@@ -150,9 +150,10 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
         if not bool((d > 0).any()):
             break
         r2, j2 = _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery)
-        better = depth(r2, j2) < d
+        d2 = depth(r2, j2)
+        better = d2 < d
         root, joints = torch.where(better[:, None], r2, root), torch.where(better[:, None], j2, joints)
-        d = torch.minimum(d, depth(r2, j2))
+        d = torch.minimum(d, d2)
     return root, joints
 
 
