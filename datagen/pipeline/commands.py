@@ -53,7 +53,8 @@ def register_synth(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="synthesis seed (default: the config's, 0)")
     p.add_argument("--seeds", type=int, default=None, dest="seeds_per_grasp",
                    help="multi-start: initial poses per output grasp, the best of them after seed_select_iter "
-                        "iterations goes on (default: 8 for force closure without --config, else the config's)")
+                        "iterations goes on (default: for force closure without --config, the job default "
+                        "datagen.synth.config.FORCE_CLOSURE_SEEDS; else the config's)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--out", required=True, help="output Parquet file")

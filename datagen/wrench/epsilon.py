@@ -33,6 +33,7 @@ from datagen.wrench.gws import (
     boundary_from_matrix,
     grasp_matrix,
     sample_directions,
+    support_from_matrix,
 )
 from datagen.wrench.cone import _rho
 from datagen.wrench.tws import task_support_cosine
@@ -60,6 +61,11 @@ class EpsilonSearch:
             raise ValueError("EpsilonSearch: num_starts cannot exceed num_samples")
         if not 0 < self.step_final_rad <= self.step0_rad:
             raise ValueError("EpsilonSearch: need 0 < step_final_rad <= step0_rad")
+
+
+#: (samples x seed directions x contacts) per chunk of the seed evaluation: bounds its memory
+#: (float64, a few tensors of this size) while keeping each chunk large enough to be FLOP-bound
+SEED_CHUNK_ELEMENTS = 1 << 22
 
 
 def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, search, generator, denom):
@@ -93,13 +99,28 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
 
         gen = generator if generator is not None else torch.Generator().manual_seed(search.seed)
         seeds = sample_directions(search.num_samples, generator=gen, device=p.device, dtype=p.dtype)
-        s_seeds = boundary_from_matrix(G, scale, seeds, mu, m, 0.0, **kw)  # one support evaluation serves both
-        vals, _ = objective_and_grad(seeds, s=s_seeds)
-        h_scale = (seeds * s_seeds).sum(-1).amax(-1)
-        idx = vals.topk(search.num_starts, dim=-1, largest=False).indices  # (..., S)
-        u = seeds[idx] if seeds.dim() == 2 else torch.gather(seeds, -2, idx[..., None].expand(*idx.shape, 6))
-        best_u, best_v = u.clone(), torch.gather(vals, -1, idx)
         one_batch_dim = p.dim() == 3 and not (torch.is_tensor(mu) and mu.dim() > 0)
+
+        if denom is not None:  # the task cosine of each seed direction (the same for every sample)
+            c_seeds = denom(seeds)
+            covered = c_seeds > 1e-6  # directions with a positive task cosine
+            c_seeds = torch.where(covered, c_seeds, torch.ones_like(c_seeds))
+
+        def starts(Gc, sc):  # the best seed directions of these samples: (u, their values, h's scale)
+            h = support_from_matrix(Gc, sc, seeds, mu, m, **kw)  # (..., K): values only, no support points
+            vals = h if denom is None else torch.where(covered, h / c_seeds, torch.full_like(h, math.inf))
+            best, idx = vals.topk(search.num_starts, dim=-1, largest=False)  # (..., S)
+            u = seeds[idx] if seeds.dim() == 2 else torch.gather(seeds, -2, idx[..., None].expand(*idx.shape, 6))
+            return u, best, h.amax(-1)
+
+        rows_per_chunk = max(1, SEED_CHUNK_ELEMENTS // (search.num_samples * m))
+        if one_batch_dim and p.shape[0] > rows_per_chunk:  # per sample, so chunks give the same values
+            parts = [starts(G[i:i + rows_per_chunk], scale[i:i + rows_per_chunk])
+                     for i in range(0, p.shape[0], rows_per_chunk)]
+            u, best, h_scale = (torch.cat(x) for x in zip(*parts))
+        else:
+            u, best, h_scale = starts(G, scale)
+        best_u, best_v = u.clone(), best
         if one_batch_dim:
             rows = (best_v.amin(-1) > search.zero_tol * h_scale).nonzero().squeeze(-1)
             if rows.numel() < p.shape[0]:  # descend only where the minimum can still be > 0

@@ -23,7 +23,8 @@ import torch
 from datagen.wrench._geometry import normalize_contact_positions, safe_normalize, tangent_basis
 from datagen.wrench.cone import MAX_DELTA_DEG, cone_support, cone_support_value
 
-__all__ = ["CONTACT_MODELS", "boundary_from_matrix", "grasp_matrix", "grasp_wrench_boundary", "sample_directions", "support_value"]
+__all__ = ["CONTACT_MODELS", "boundary_from_matrix", "grasp_matrix", "grasp_wrench_boundary", "sample_directions",
+           "support_from_matrix", "support_value"]
 
 CONTACT_MODELS = ("pcf", "sfc")
 
@@ -196,7 +197,24 @@ def support_value(
     """
     _check_inputs(points, normals, mu, contact_model, torsional_mu)
     G, scale = grasp_matrix(points, normals, normalize=normalize, contact_model=contact_model)
-    q = _local_queries(G, directions.to(G.dtype), points.shape[-2])
+    return support_from_matrix(G, scale, directions, mu, points.shape[-2], contact_model=contact_model,
+                               torsional_mu=torsional_mu, normalize=normalize)
+
+
+def support_from_matrix(
+    G: torch.Tensor,
+    scale: torch.Tensor,
+    directions: torch.Tensor,
+    mu,
+    m: int,
+    *,
+    contact_model: str = "pcf",
+    torsional_mu: float = 0.0,
+    normalize: bool = True,
+) -> torch.Tensor:
+    """:func:`support_value` from a precomputed :func:`grasp_matrix`, ``(..., K)``: the values
+    alone, without the support points (no cone geometry, no second product with ``G``)."""
+    q = _local_queries(G, directions.to(G.dtype), m)
     mu_q = _mu_tensor(mu, q)
     if contact_model == "sfc":
         mu_tor = _torsion(torsional_mu, scale, normalize, q)

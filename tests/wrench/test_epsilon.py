@@ -164,3 +164,22 @@ def test_samples_not_in_force_closure_skip_the_search_and_the_others_are_unchang
     assert torch.isfinite(g).all() and float(g[[0, 2]].abs().max()) == 0.0
     t_eps = task_epsilon(P.detach(), N, 1.0, [0, 0, -1, 0, 0, 0], 30.0)  # the flat set only pushes +z
     assert t_eps[0].item() == 0.0 and t_eps[2].item() == 0.0 and bool((t_eps[[1, 3, 4]] > 0).all())
+
+
+def test_seed_evaluation_in_chunks_gives_the_same_values(monkeypatch):
+    """The seed directions of a large batch are evaluated a chunk of samples at a time (memory):
+    with chunks of 2 samples, the metric and the task metric equal the one-chunk values exactly,
+    force-closure and non-closure samples mixed."""
+    import datagen.wrench.epsilon as eps_mod
+
+    cases = [_case(s, 4, "sphere") for s in (0, 2, 3, 4)]
+    z = np.array([0.0, 0.0, 1.0])
+    cases.insert(2, (np.array([[0.0, 0, -0.03], [0.01, 0, -0.03], [0, 0.01, -0.03], [0.01, 0.01, -0.03]]),
+                     np.tile(z, (4, 1))))
+    P = torch.tensor(np.stack([c[0] for c in cases]))
+    N = torch.tensor(np.stack([c[1] for c in cases]))
+    whole = epsilon_metric(P, N, 1.0)
+    whole_t = task_epsilon(P, N, 1.0, [0, 0, 0, 0, 0, 1], 60.0)
+    monkeypatch.setattr(eps_mod, "SEED_CHUNK_ELEMENTS", 2 * EpsilonSearch().num_samples * 4)
+    assert torch.equal(epsilon_metric(P, N, 1.0), whole) and whole[2].item() == 0.0
+    assert torch.equal(task_epsilon(P, N, 1.0, [0, 0, 0, 0, 0, 1], 60.0), whole_t)
