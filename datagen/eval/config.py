@@ -66,6 +66,11 @@ class EvalConfig(Config):
     actuator_force_limit: float = 3.0              # N or N m, symmetric
     actuator_time_constant_s: float = 0.1          # actuator damping kv <= kp * this (Shadow: kv 0)
     weld_solref: tuple[float, float] = (0.02, 1.0)  # mocap-to-hand-root weld (MuJoCo default)
+    # Dry friction of the hand's joints, N m (None: the hand asset's own: Menagerie's Shadow 0.001
+    # on each of its 24 joints, E3M5 0.01, LEAP 0.001, Allegro none). Each joint with friction is
+    # one more constraint row for the solver and the no-slip pass at every step (24 of the ~75 rows
+    # of a closed Shadow grasp); 0 removes them (benchmarks/results/eval.md: cost and verdicts).
+    joint_frictionloss: float | None = None
     # "palm": the hand rooted at the palm, wrist joints held at the row's values (the public
     # protocol's rooting: its Shadow has no forearm); "spec": the hand spec's root (the Shadow
     # forearm, 3-4 kg, wrist joints driven by kp-5 actuators). Same success verdict on 264 of 268
@@ -125,6 +130,8 @@ class EvalConfig(Config):
         _check(self.hand_root in ("spec", "palm"), f"{c}.hand_root", f"must be 'spec' or 'palm', got {self.hand_root!r}")
         _check(self.impratio >= 1, f"{c}.impratio", "must be >= 1")
         _check(self.noslip_iterations >= 0, f"{c}.noslip_iterations", "must be >= 0")
+        _check(self.joint_frictionloss is None or self.joint_frictionloss >= 0, f"{c}.joint_frictionloss",
+               f"must be null (the hand asset's) or >= 0 N m, got {self.joint_frictionloss}")
         _check(self.condim in (1, 3, 4, 6), f"{c}.condim", "must be 1, 3, 4 or 6")
         _check(len(self.friction) == 2 and min(self.friction) >= 0, f"{c}.friction", "two values >= 0")
         _check(len(self.hand_solimp) == 3 and len(self.hand_solref) == 2, f"{c}.hand_solimp/solref", "3 and 2 values")

@@ -186,6 +186,10 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     weld.data[:12] = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0]
     weld.solref = list(cfg.weld_solref)
 
+    if cfg.joint_frictionloss is not None:  # only the hand's joints exist in the spec so far
+        for j in spec.joints:
+            if j.type != mujoco.mjtJoint.mjJNT_FREE:
+                j.frictionloss = cfg.joint_frictionloss
     for g in spec.geoms:
         _set_contact(g, cfg, hand=True)
     for p in spec.pairs:  # explicit self-collision pairs of the hand MJCF
