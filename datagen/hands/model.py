@@ -230,11 +230,11 @@ class HandModel:
     @staticmethod
     def _apply(T: torch.Tensor, index: torch.Tensor, local: torch.Tensor, direction: bool = False) -> torch.Tensor:
         # R @ p + t written out column by column, in a links-first layout: the 3 x 4 blocks,
-        # (..., L, 4, 4) -> (L, B, 12), are gathered per point along dim 0, (N, B, 12), so that the
-        # gradient scatters back as whole contiguous rows (index_add_ along a later dim loops over
-        # strided slices: 5 ms per column at 1600 Shadow poses); each column is then scaled by the
-        # point's coordinate. The same arithmetic as the batched 3 x 3 @ 3 x 1 matmul (identical
-        # values), without one tiny GEMM per point and pose.
+        # (..., L, 4, 4) -> (L, 4 x B x 3) (column-major per link), are gathered per point along
+        # dim 0, (N, 4, B, 3), so that the gradient scatters back as whole contiguous rows
+        # (index_add_ along a later dim loops over strided slices: 5 ms per column at 1600 Shadow
+        # poses); each column is then scaled by the point's coordinate. The same arithmetic as the
+        # batched 3 x 3 @ 3 x 1 matmul (identical values), without one tiny GEMM per point and pose.
         batch, L = T.shape[:-3], T.shape[-3]
         blocks = T[..., :3, :].reshape(-1, L, 3, 4).permute(1, 3, 0, 2).reshape(L, -1)  # (L, 4 B 3)
         g = blocks.index_select(0, index).view(len(index), 4, -1, 3)  # (N, 4, B, 3): column j at [:, j]
