@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import pickle
 import shutil
@@ -110,6 +111,33 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             os.environ["DATAGEN_CACHE"] = before
 
 
+def _idle_cores():
+    """On a one-node Ray cluster (the local one of ``make dataset``), a function giving how many of
+    its CPUs no task holds now (asked at most once a second); None outside Ray or on a cluster of
+    several nodes (an idle CPU there may be on another machine). When a job's other shards have
+    finished and none waits, the evaluation steps its directions on the freed core
+    (`datagen.eval.Evaluator`, ``spare_cores``)."""
+    import ray
+
+    try:
+        if not ray.is_initialized() or sum(bool(n.get("Alive")) for n in ray.nodes()) != 1:
+            return None
+    except Exception:  # noqa: BLE001 - no answer: evaluate as before, on this core
+        return None
+    last = {"t": -math.inf, "idle": 0}
+
+    def idle() -> int:
+        now = time.monotonic()
+        if now - last["t"] >= 1.0:
+            try:
+                idle_now = int(ray.available_resources().get("CPU", 0))
+            except Exception:  # noqa: BLE001 - a question about spare cores never fails a grasp
+                idle_now = 0
+            last["t"], last["idle"] = now, idle_now
+        return last["idle"]
+    return idle
+
+
 def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     import torch
 
@@ -165,7 +193,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
 
     batch = run_batch(ready, hand, cfg.tasks, scfg, ecfg, grasps_per_object=cfg.grasps_per_object,
                       seed=shard_seed(cfg, index), grid_resolution=cfg.grid_resolution, cache=cache, base=job.path,
-                      device=device, progress=moved, eval_workers=max(1, int(cfg.cpus_per_shard)))
+                      device=device, progress=moved, eval_workers=max(1, int(cfg.cpus_per_shard)),
+                      eval_spare_cores=_idle_cores())
     for f in batch.failures:
         fails.append({**f, "shard": index})
     timings.update(batch.timings)

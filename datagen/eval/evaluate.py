@@ -30,6 +30,7 @@ import enum
 import logging
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -119,22 +120,39 @@ class TaskMargin:
 class Evaluator:
     """Evaluates grasps of one hand under one `EvalConfig`. Scenes (one per object, scale and
     object joint) are cached, ``cache_size`` at most. Not thread-safe: use one per worker.
-    Call `close` (or use it as a context manager) to stop its thread pool."""
+    Call `close` (or use it as a context manager) to stop its thread pool.
 
-    def __init__(self, hand, cfg: EvalConfig | None = None, *, cache_size: int = 8) -> None:
+    ``spare_cores``: optional, how many CPU cores sit idle right now (a job's shard asks its Ray
+    cluster). With ``cfg.threads`` 1, a grasp that starts while one is idle steps its directions
+    on 2 threads: the verdicts are the same for any number of threads (`hold`), so this only
+    fills a core that would wait, such as the one a job's first finished shard leaves behind."""
+
+    def __init__(self, hand, cfg: EvalConfig | None = None, *, cache_size: int = 8,
+                 spare_cores: Callable[[], int] | None = None) -> None:
         self.hand = hand
         self.cfg = cfg or EvalConfig()
         self._scenes: OrderedDict = OrderedDict()
         self._hold_cfgs: dict = {}
         self._cache_size = cache_size
         self._pool = ThreadPoolExecutor(self.cfg.threads) if self.cfg.threads > 1 else None
+        self._spare_cores, self._spare_pool = spare_cores, None
         self._search = EpsilonSearch(num_samples=self.cfg.epsilon_samples,
                                      num_starts=min(8, self.cfg.epsilon_samples), iters=self.cfg.epsilon_iters)
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+        for pool in (self._pool, self._spare_pool):
+            if pool is not None:
+                pool.shutdown()
+        self._pool = self._spare_pool = None
+
+    def _hold_pool(self) -> ThreadPoolExecutor | None:
+        """The pool that steps the next grasp's directions: the config's (``threads`` > 1), else,
+        while ``spare_cores()`` reports an idle core, one of 2 threads; None: this thread."""
+        if self._pool is not None or self._spare_cores is None or self._spare_cores() < 1:
+            return self._pool
+        if self._spare_pool is None:
+            self._spare_pool = ThreadPoolExecutor(2)
+        return self._spare_pool
 
     def __enter__(self) -> "Evaluator":
         return self
@@ -291,7 +309,8 @@ class Evaluator:
             wrenches = np.array([[*(f * np.asarray(d)), 0.0, 0.0, 0.0] for d in DIRECTIONS])
         else:
             wrenches = test.disturbance(mass, pieces.scale, cfg.force_per_kg)[None]
-        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, self._hold_config(test), self._pool)
+        pool = self._hold_pool()
+        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, self._hold_config(test), pool)
         steps = n0 + sum(int(round(d.time / cfg.timestep_s)) - n0 for d in datas[:len(wrenches)])
         failed = [i for i, d in enumerate(dirs) if d.success is False]
         if not failed:
@@ -309,7 +328,7 @@ class Evaluator:
         hold_cfg = self._hold_config(test)
 
         def holds(k: float) -> bool:
-            out = hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, self._pool)
+            out = hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, pool)
             return all(d.success for d in out)
 
         tested, held = [(1.0, res.success)], 0.0

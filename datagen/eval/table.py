@@ -115,8 +115,8 @@ def row_pieces(row: dict, base: Path) -> ObjectPieces:
     return pieces_from_processed(processed, float(row["object_scale_m"]))
 
 
-def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspResult]:
-    """Evaluate rows in this process (one `Evaluator` per hand)."""
+def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None) -> list[GraspResult]:
+    """Evaluate rows in this process (one `Evaluator` per hand; ``spare_cores`` as there)."""
     import torch
 
     from datagen.hands import load_hand
@@ -130,7 +130,7 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict) -> list[GraspRes
         for row in rows:
             hand = str(row["hand"])
             if hand not in evaluators:
-                evaluators[hand] = Evaluator(load_hand(hand), cfg)
+                evaluators[hand] = Evaluator(load_hand(hand), cfg, spare_cores=spare_cores)
             out.append(evaluators[hand].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
                                                  w_t=row.get("w_t")))
     finally:
@@ -153,14 +153,16 @@ def _evaluate_rows_pooled(rows: list[dict], base: str, cfg_dict: dict):
             return RuntimeError(f"{type(exc).__name__}: {exc}")
 
 
-def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1) -> pa.Table:
+def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1,
+                   spare_cores=None) -> pa.Table:
     """``table`` with `EVAL_COLUMNS` appended (replaced if present). ``workers`` > 1 splits the
-    rows into contiguous chunks evaluated by a process pool (results are identical)."""
+    rows into contiguous chunks evaluated by a process pool (results are identical); with one,
+    ``spare_cores`` (see `Evaluator`) lets a grasp use an idle core."""
     names = list(INPUT_COLUMNS) + (["w_t"] if "w_t" in table.column_names else [])
     rows = table.select(names).to_pylist()
     cfg_d = cfg.to_dict()
     if workers <= 1 or len(rows) < 2:
-        results = _evaluate_rows(rows, str(base), cfg_d)
+        results = _evaluate_rows(rows, str(base), cfg_d, spare_cores)
     else:
         n = min(workers, len(rows))
         bounds = np.linspace(0, len(rows), n + 1).astype(int)

@@ -137,13 +137,14 @@ def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, 
 
 def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, *, base: str | Path = ".",
                   failures: list | None = None, progress: Callable[[], None] | None = None,
-                  workers: int = 1) -> list[pa.Table]:
+                  workers: int = 1, spare_cores: Callable[[], int] | None = None) -> list[pa.Table]:
     """The rows of ``table`` evaluated in MuJoCo (`datagen.eval.table.evaluate_table`), one
     table per target (object and scale) in ``targets`` order. A target whose evaluation raises is
     appended to ``failures`` (stage ``eval``; raised when ``failures`` is None) and its rows
     dropped. ``progress()`` is called once per target. ``workers`` > 1: the rows of all targets
     go to one pool of that many processes (the verdicts are the same as with one); if that
-    raises, each target is evaluated on its own to find the one that fails."""
+    raises, each target is evaluated on its own to find the one that fails. ``spare_cores``: see
+    `datagen.eval.Evaluator` (with one worker, a grasp may use a core that sits idle)."""
     from datagen.eval.table import evaluate_table
 
     def rows_of(tb: pa.Table, t) -> pa.Table:
@@ -167,7 +168,8 @@ def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, 
         if progress is not None:
             progress()
         try:
-            out.append(evaluate_table(rows_of(table, t), eval_cfg, base=base, workers=workers))
+            out.append(evaluate_table(rows_of(table, t), eval_cfg, base=base, workers=workers,
+                                      spare_cores=spare_cores))
         except Exception as exc:  # noqa: BLE001
             if failures is None:
                 raise
@@ -179,7 +181,8 @@ def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, 
 def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, eval_cfg, *,
               grasps_per_object: int, seed: int | None = None, grid_resolution: int | None = None,
               cache: str | Path | None = None, base: str | Path = ".", device: str = "cpu",
-              progress: Progress | None = None, eval_workers: int = 1) -> BatchResult:
+              progress: Progress | None = None, eval_workers: int = 1,
+              eval_spare_cores: Callable[[], int] | None = None) -> BatchResult:
     """Processed objects -> evaluated rows (see the module docstring).
 
     ``hand``: a `datagen.hands.HandModel` on ``device``; ``tasks``: `TaskSpec`s or names/YAML
@@ -187,7 +190,7 @@ def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, 
     ``seed`` when given; ``eval_cfg`` (`EvalConfig`); ``grasps_per_object`` per object and scale;
     ``grid_resolution`` and ``cache``: see `build_targets`; ``base``: the directory the objects'
     ``object_path`` values are relative to; ``eval_workers``: processes for the MuJoCo tests
-    (`evaluate_rows`). ``progress(done, total)`` in work units: one per
+    and ``eval_spare_cores`` (`evaluate_rows`). ``progress(done, total)`` in work units: one per
     object's target, then per task as many for its synthesis (moving with its iterations) and as
     many again for its evaluation as there are objects x scales."""
     from datagen.tasks import load_task, task_targets
@@ -238,7 +241,8 @@ def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, 
         report(start + n_targets, absolute=True)
         t0 = time.perf_counter()
         tables += evaluate_rows(table, targets, task.name, eval_cfg, base=base, failures=fails,
-                                progress=lambda: report(n_targets / len(targets)), workers=eval_workers)
+                                progress=lambda: report(n_targets / len(targets)), workers=eval_workers,
+                                spare_cores=eval_spare_cores)
         timings["eval_s"] += time.perf_counter() - t0
     schema = arrow_schema("evaluated", nq=7 + hand.num_joints).remove_metadata()
     rows = (pa.concat_tables([tb.select(schema.names).cast(schema) for tb in tables]) if tables
