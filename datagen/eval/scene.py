@@ -186,7 +186,7 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     weld.data[:12] = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0]
     weld.solref = list(cfg.weld_solref)
 
-    if cfg.joint_frictionloss is not None:  # only the hand's joints exist in the spec so far
+    if cfg.joint_frictionloss is not None:  # the hand's joints (the object's are added below)
         for j in spec.joints:
             if j.type != mujoco.mjtJoint.mjJNT_FREE:
                 j.frictionloss = cfg.joint_frictionloss

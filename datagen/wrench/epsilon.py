@@ -81,9 +81,8 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
         m = p.shape[-2]
         kw = dict(contact_model=contact_model, torsional_mu=torsional_mu, normalize=normalize)
 
-        def objective_and_grad(u, G=G, scale=scale, s=None):
-            if s is None:
-                s = boundary_from_matrix(G, scale, u, mu, m, 0.0, **kw)  # exact support point = grad h
+        def objective_and_grad(u, G=G, scale=scale):
+            s = boundary_from_matrix(G, scale, u, mu, m, 0.0, **kw)  # exact support point = grad h
             h = (u * s).sum(-1)
             if denom is None:
                 return h, s
