@@ -60,6 +60,7 @@ class SynthConfig(Config):
     squeeze_force_n: float = 10.0  #: "force": largest fingertip grip force, N (10 N: best of 2/4/10/20 in MuJoCo holds)
     squeeze_kp: float = 5.0  #: "force": position-actuator stiffness the squeeze is computed for, N m/rad (eval protocol)
     squeeze_gap_m: float = 0.002  #: "force": extra fingertip travel along the normal (sphere overshoot), m
+    squeeze_mount: bool = True  #: "force"/"hand" on a mounted task object: balance only the force along its joint
     squeeze_m: float = 0.01  #: "normal": fingertips move this far out (pregrasp) / in (squeeze) along the normals
     squeeze_rad: float = 0.1  #: "joint": pregrasp opens each joint by up to this towards the open pose
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact

@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "hand_squeeze", "joint_squeeze", "actuator_compliance",
-           "normal_squeeze", "point_jacobian", "pregrasp_and_squeeze", "tip_jacobian"]
+__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "grip_forces", "hand_squeeze", "joint_squeeze",
+           "joint_mobility", "actuator_compliance", "normal_squeeze", "point_jacobian", "pregrasp_and_squeeze", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -52,9 +52,35 @@ def _damped_step(J: torch.Tensor, e: torch.Tensor, damping_m: float) -> torch.Te
                                                     e.reshape(e.shape[0], -1, 1))).squeeze(-1)
 
 
-def _balance(f: torch.Tensor) -> torch.Tensor:
-    """``(B,)`` 1 - |sum f| / sum |f| of forces ``(B, C, 3)``: 1 a pure grip, 0 all pushing one way."""
-    return (1.0 - f.sum(1).norm(dim=-1) / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp_min(0.0)
+def _balance(f: torch.Tensor, unit_mobility: torch.Tensor | None = None) -> torch.Tensor:
+    """``(B,)`` 1 - |sum f| / sum |f| of forces ``(B, C, 3)``: 1 a pure grip, 0 all pushing one way.
+    With ``unit_mobility`` ``(B, C, 3)`` (a mounted object, :func:`_unit_mobility`): 1 - |sum f . u| /
+    sum |f|, the share of the grip that does not drive the object along its joint."""
+    net = f.sum(1).norm(dim=-1) if unit_mobility is None else (f * unit_mobility).sum((1, 2)).abs()
+    return (1.0 - net / f.norm(dim=-1).sum(-1).clamp_min(1e-12)).clamp(0.0, 1.0)
+
+
+def grip_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, force_n: float,
+                min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None,
+                mobility: torch.Tensor | None = None, mounted: torch.Tensor | None = None,
+                scale_count: int | None = None) -> torch.Tensor:
+    """``(B, C, 3)`` N: the :func:`balanced_forces` of each sample, scaled so that the largest of
+    its first ``scale_count`` contacts (all: None) is ``force_n`` times the set's balance
+    (:func:`_balance`). ``mobility`` ``(B, C, 3)`` and ``mounted`` ``(B,)`` bool: the samples on a
+    mounted object balance only the force along its joint (None: every sample is free)."""
+    kw = dict(min_normal=min_normal, active=active)
+    f = balanced_forces(points, inward_normals, mu, **kw)
+    on = points.new_ones(points.shape[:2]) if active is None else active.to(points.dtype)
+    u = None
+    if mobility is not None and mounted is not None and bool(mounted.any()):
+        rows = mounted.nonzero().squeeze(-1)
+        sub = {k: None if v is None else v[rows] for k, v in kw.items()}
+        f = f.clone()
+        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=mobility[rows], **sub)
+        u = torch.where(mounted[:, None, None], _unit_mobility(mobility, on), torch.zeros_like(mobility))
+    balance = _balance(f) if u is None else torch.where(mounted, _balance(f, u), _balance(f))
+    k = f.shape[1] if scale_count is None else scale_count
+    return f * (force_n * balance / f[:, :k].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
 
 
 def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m):
@@ -89,8 +115,25 @@ def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphe
     return pre, squeeze
 
 
+def joint_mobility(points: torch.Tensor, kind: str, axis, anchor_m) -> torch.Tensor:
+    """``(..., C, 3)``: the velocity of each contact point ``(..., C, 3)`` m of a mounted object
+    moving on its joint at unit rate: ``axis`` for a ``slide`` (m/m), ``axis x (p - anchor)`` for a
+    ``hinge`` (m/rad; ``anchor_m`` a point of the axis, metres, object frame). A contact force
+    ``f_i`` does work ``f_i . u_i`` on the joint: ``sum_i f_i . u_i`` is the generalized force that
+    moves the object; everything else the mount takes."""
+    a = torch.as_tensor(axis, dtype=points.dtype, device=points.device)
+    a = a / a.norm()
+    if kind == "slide":
+        return a.expand_as(points).clone()
+    if kind == "hinge":
+        o = torch.as_tensor(anchor_m, dtype=points.dtype, device=points.device)
+        return torch.linalg.cross(a.expand_as(points), points - o)
+    raise ValueError(f"joint_mobility: a mounted joint is 'hinge' or 'slide', got {kind!r}")
+
+
 def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, iters: int = 300,
-                    min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None) -> torch.Tensor:
+                    min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None,
+                    mobility: torch.Tensor | None = None) -> torch.Tensor:
     """``(B, C, 3)`` contact forces with the smallest net wrench, each in its friction cone.
 
     ``f_i = lam_i n_i + t_i`` with ``lam_i >= min_normal_i`` (default 1: every contact grips),
@@ -100,16 +143,47 @@ def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: floa
     net wrench (internal forces only); the residual of any other set is as small as the cones
     allow. points ``(B, C, 3)`` m; min_normal ``(B, C)``; active ``(B, C)`` bool (inactive contacts
     carry no force).
+
+    ``mobility`` ``(B, C, 3)`` (:func:`joint_mobility`): the object is mounted on a one-dof joint,
+    and only the net force along its motion counts, ``(sum_i f_i . u_i / U)^2`` with ``U`` the
+    active contacts' mean ``|u_i|``: the mount (a hinge's bearing, a drawer's runners) takes the
+    rest of the net wrench, so forces need not cancel across the joint's constrained directions.
     """
     B, C = points.shape[:2]
     lo = points.new_ones(B, C) if min_normal is None else min_normal.to(points.dtype)
     on = points.new_ones(B, C) if active is None else active.to(points.dtype)
     lo = (lo * on)[..., None]
     w = on[..., None]
+    n = inward_normals / inward_normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    if mobility is not None:
+        u = _unit_mobility(mobility, on)
+        step = 1.0 / (2 * u.square().sum((1, 2)).clamp_min(1e-9))[:, None, None]
+        return _fista(n, lo, w, mu, iters, step, lambda y: 2 * (y * u).sum((1, 2))[:, None, None] * u)
     c = (points * w).sum(1, keepdim=True) / w.sum(1, keepdim=True).clamp_min(1.0)
     r = (points - c) * w
     r = r / ((r.norm(dim=-1).sum(1) / on.sum(1).clamp_min(1.0))[:, None, None]).clamp_min(1e-9)
-    n = inward_normals / inward_normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+    def grad_fn(y):  # d/df_i of the residual
+        force = y.sum(1, keepdim=True)  # (B, 1, 3)
+        torque = torch.linalg.cross(r, y).sum(1, keepdim=True)
+        return 2 * (force + torch.linalg.cross(torque.expand_as(r), r))
+
+    # Lipschitz constant of the residual's gradient: 2 |A|^2 <= 2 C (1 + max |r|^2)
+    step = 1.0 / (2 * on.sum(1).clamp_min(1.0) * (1 + r.square().sum(-1).amax(-1)))[:, None, None]
+    return _fista(n, lo, w, mu, iters, step, grad_fn)
+
+
+def _unit_mobility(mobility: torch.Tensor, on: torch.Tensor) -> torch.Tensor:
+    """``(B, C, 3)`` contact mobilities over the active contacts' mean ``|u_i|`` (0 where inactive;
+    all 0 where every active contact is on a hinge's axis: no force can turn it)."""
+    u = mobility * on[..., None]
+    mean = u.norm(dim=-1).sum(1) / on.sum(1).clamp_min(1.0)  # (B,)
+    return torch.where(mean[:, None, None] > 1e-12, u / mean.clamp_min(1e-12)[:, None, None], torch.zeros_like(u))
+
+
+def _fista(n, lo, w, mu, iters, step, grad_fn):
+    """Accelerated projected gradient of a residual with gradient ``grad_fn`` over the contact
+    forces' cones ``{lam >= lo, |t| <= mu lam}`` (zero where ``w`` is 0); see :func:`balanced_forces`."""
 
     def project(f):  # Euclidean projection onto {lam >= lo, |t| <= mu lam}, zero where inactive
         lam = (f * n).sum(-1, keepdim=True)
@@ -124,13 +198,8 @@ def balanced_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: floa
         return (torch.where(low, lo, lam_c) * n + t_c) * w
 
     f = y = n * lo.clamp_min(1e-3) * w
-    # Lipschitz constant of the residual's gradient: 2 |A|^2 <= 2 C (1 + max |r|^2)
-    step = 1.0 / (2 * on.sum(1).clamp_min(1.0) * (1 + r.square().sum(-1).amax(-1)))[:, None, None]
     for k in range(iters):  # accelerated projected gradient (FISTA)
-        force = y.sum(1, keepdim=True)  # (B, 1, 3)
-        torque = torch.linalg.cross(r, y).sum(1, keepdim=True)
-        grad = 2 * (force + torch.linalg.cross(torque.expand_as(r), r))  # d/df_i of the residual
-        f_next = project(y - step * grad)
+        f_next = project(y - step * grad_fn(y))
         y = f_next + (k / (k + 3)) * (f_next - f)
         f = f_next
     return f
@@ -185,8 +254,9 @@ def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
 
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                   points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
-                  approach_m: float, movable: torch.Tensor,
-                  damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+                  approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
+                  mobility: torch.Tensor | None = None,
+                  mounted: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze makes balanced grip forces.
 
     Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
@@ -198,17 +268,19 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     ``approach_m`` along the normal (the gap between the collision spheres and the hand's real
     geometry). The pregrasp is the mirror image
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
+    ``mobility`` ``(B, F, 3)`` / ``mounted`` ``(B,)``: samples on a mounted object, whose balance
+    counts only the force along its joint (:func:`grip_forces`).
     """
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
-    f = balanced_forces(points, inward_normals, mu)
-    f = f * (force_n * _balance(f) / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    f = grip_forces(points, inward_normals, mu, force_n, mobility=mobility, mounted=mounted)
     return _grip(hand, joints, J, f, J, inward_normals, movable, kp, approach_m, damping_m)
 
 
 def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                  points: torch.Tensor, inward_normals: torch.Tensor, link_points: torch.Tensor,
                  link_normals: torch.Tensor, link_touching: torch.Tensor, mu: float, kp: float, force_n: float,
-                 approach_m: float, movable: torch.Tensor, damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
+                 approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
+                 mobility_fn=None, mounted: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze balances the whole hand's contacts.
 
     As :func:`force_squeeze`, but the balanced forces are solved over every contact the closed
@@ -220,6 +292,7 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     so the fingertips' forces no longer have to cancel among themselves, and the joint torques
     ``tau = sum_c J_c^T f_c`` include the phalanges' share. The palm (no movable joint) only
     reacts. Scaled so the largest fingertip force is ``force_n`` times the set's balance.
+    ``mobility_fn(points (B, C, 3)) -> (B, C, 3)`` and ``mounted`` ``(B,)``: as in :func:`force_squeeze`.
     """
     B, F = points.shape[:2]
     tip_links = hand.sphere_link_index[tip_spheres]  # (F,)
@@ -229,8 +302,8 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     N = torch.cat([inward_normals, link_normals], 1)
     active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), others], 1)
     lo = torch.cat([P.new_ones(B, F), P.new_zeros(B, links.shape[0])], 1)
-    f = balanced_forces(P, N, mu, min_normal=lo, active=active)
-    f = f * (force_n * _balance(f) / f[:, :F].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    f = grip_forces(P, N, mu, force_n, min_normal=lo, active=active, scale_count=F, mounted=mounted,
+                    mobility=None if mobility_fn is None else mobility_fn(P))
     all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
     Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
     Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
@@ -245,19 +318,28 @@ def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch
 
 
 def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inward_normals, movable,
-                         link_contacts=None):
+                         link_contacts=None, mount=None):
     """``(pregrasp, squeeze)`` joints by ``cfg.squeeze_mode`` (a :class:`datagen.synth.SynthConfig`).
 
     ``link_contacts``: ``(points (B, L, 3), inward normals (B, L, 3), touching (B, L))`` of every
-    link (:func:`datagen.synth.select.link_contacts`), needed by the "hand" mode."""
+    link (:func:`datagen.synth.select.link_contacts`), needed by the "hand" mode. ``mount``:
+    ``(kind, axis, anchor_m, mounted (B,) bool)``, the joint of a mounted task object and the
+    samples on it (None: every object is free); the "force" and "hand" modes then balance only
+    the force along that joint."""
+    mobility_fn, mounted = None, None
+    if mount is not None:
+        kind, axis, anchor, mounted = mount
+        mobility_fn = lambda p: joint_mobility(p, kind, axis, anchor)  # noqa: E731
     if cfg.squeeze_mode == "hand":
         if link_contacts is None:
             raise ValueError("squeeze_mode 'hand' needs the links' contacts")
         return hand_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, *link_contacts, cfg.mu,
-                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
+                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable,
+                            mobility_fn=mobility_fn, mounted=mounted)
     if cfg.squeeze_mode == "force":
         return force_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, cfg.mu, cfg.squeeze_kp,
-                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable)
+                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable,
+                             mobility=None if mobility_fn is None else mobility_fn(points), mounted=mounted)
     if cfg.squeeze_mode == "normal":
         return normal_squeeze(hand, root_pose, joints, tip_spheres, inward_normals, cfg.squeeze_m, movable)
     return joint_squeeze(hand, joints, cfg.squeeze_rad)

@@ -104,6 +104,23 @@ def _resolve_fingers(hand, task: TaskSpec) -> list[int]:
     return [hand.fingertip_names.index(f) for f in present]
 
 
+def _mount(task: TaskSpec, targets, object_index: torch.Tensor):
+    """``(kind, axis, anchor_m, mounted (B,) bool)``: the hinge or slide a mounted task object moves
+    on (its test's virtual joint, object frame) and the samples on that object; None when the task
+    has no such object among ``targets`` (force closure, a free object)."""
+    from datagen.tasks import task_object, task_object_id, task_test_from_spec
+
+    if task_object(task) is None:
+        return None
+    test = task_test_from_spec(task)
+    if test is None or test.joint == "free":
+        return None
+    oid = task_object_id(task)
+    on = torch.tensor([t.object_id == oid for t in targets], dtype=torch.bool, device=object_index.device)
+    mounted = on[object_index]
+    return (test.joint, test.axis, test.anchor, mounted) if bool(mounted.any()) else None
+
+
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
                generator: torch.Generator | None = None, callback=None) -> SynthesisResult:
     """Optimize ``num_per_object`` poses on each target; see the module docstring."""
@@ -180,7 +197,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         links = (link_contacts(hand, targets, object_index, root_f, grasp_j, cfg.seed_contact_gap_m)
                  if cfg.squeeze_mode == "hand" else None)
         pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
-                                           state.contact_normals, finger_joint_mask(hand), links)
+                                           state.contact_normals, finger_joint_mask(hand), links,
+                                           mount=_mount(task, targets, object_index) if cfg.squeeze_mount else None)
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, object_index, root_f, j, tip_spheres,

@@ -307,3 +307,95 @@ def test_actuator_compliance_gives_the_wanted_generalized_forces():
         assert checked >= 12
         if name == "allegro":
             assert torch.allclose(dq, tau / kp)
+
+
+def test_joint_mobility_is_the_velocity_of_the_joint_motion():
+    from scipy.spatial.transform import Rotation
+
+    from datagen.synth.squeeze import joint_mobility
+
+    rng = np.random.default_rng(5)
+    p = rng.normal(size=(2, 4, 3)) * 0.05
+    axis = np.array([0.3, -0.4, 0.866])
+    axis /= np.linalg.norm(axis)
+    anchor = np.array([0.01, -0.02, 0.005])
+    h = 1e-6  # finite difference of the motion itself: rotate about the axis through the anchor, or slide
+    turned = Rotation.from_rotvec(h * axis).apply((p - anchor).reshape(-1, 3)).reshape(p.shape) + anchor
+    u = joint_mobility(torch.tensor(p), "hinge", axis.tolist(), anchor.tolist()).numpy()
+    np.testing.assert_allclose(u, (turned - p) / h, atol=1e-7)
+    u = joint_mobility(torch.tensor(p), "slide", (2 * axis).tolist(), anchor.tolist()).numpy()
+    np.testing.assert_allclose(u, np.broadcast_to(axis, p.shape), atol=1e-12)
+    with pytest.raises(ValueError, match="hinge"):
+        joint_mobility(torch.tensor(p), "free", axis.tolist(), anchor.tolist())
+
+
+def _zero_joint_force_feasible(n: np.ndarray, u: np.ndarray, edge_radius: float) -> bool:
+    """LP over 8-edge pyramids (as ``_zero_wrench_feasible``): do forces with every normal part
+    >= 1 exist that do no work on the joint (``sum f_i . u_i = 0``)?"""
+    F = len(n)
+    cols = []
+    for ni, ui in zip(n, u):
+        t1 = np.cross(ni, [1.0, 0, 0] if abs(ni[0]) < 0.9 else [0, 1.0, 0])
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(ni, t1)
+        for k in range(8):
+            a = 2 * np.pi * k / 8
+            cols.append((ni + edge_radius * (np.cos(a) * t1 + np.sin(a) * t2)) @ ui)
+    A_ub = np.zeros((F, 8 * F))
+    for i in range(F):
+        A_ub[i, 8 * i:8 * i + 8] = -1.0
+    res = linprog(np.zeros(8 * F), A_ub=A_ub, b_ub=-np.ones(F), A_eq=np.array(cols)[None], b_eq=[0.0], bounds=(0, None))
+    return res.status == 0
+
+
+def test_mounted_balance_counts_only_the_force_along_the_joint():
+    """Contacts on a knob (hinge) or a drawer bar (slide): the forces stay in their cones and do no
+    work on the joint whenever an LP says such forces exist, and cannot where it says they cannot."""
+    from datagen.synth.squeeze import joint_mobility
+
+    rng = np.random.default_rng(11)
+    mu, checked = 0.5, {"zero": 0, "nonzero": 0}
+    for trial in range(24):
+        kind = ("hinge", "slide")[trial % 2]
+        ang = rng.uniform(0, 2 * np.pi, size=3)
+        p = np.stack([0.02 * np.cos(ang), 0.02 * np.sin(ang), rng.uniform(0, 0.02, 3)], 1)
+        u = joint_mobility(torch.tensor(p), kind, (0, 0, 1), (0, 0, 0)).numpy()
+        # inward, tilted along the joint's motion by up to 60 deg; every third trial all one way
+        tilt = rng.uniform(-1.7, 1.7, size=(3, 1))
+        if trial % 3 == 0:
+            tilt = np.abs(tilt) + 0.3
+        n = -p * [1, 1, 0] / 0.02 + tilt * u / np.linalg.norm(u, axis=1, keepdims=True)
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        f = balanced_forces(torch.tensor(p[None]), torch.tensor(n[None]), mu, iters=3000,
+                            mobility=torch.tensor(u[None]))[0].numpy()
+        lam = (f * n).sum(-1)
+        tang = np.linalg.norm(f - lam[:, None] * n, axis=1)
+        assert (lam >= 1 - 1e-9).all() and (tang <= mu * lam + 1e-9).all()
+        work = abs((f * u).sum()) / np.linalg.norm(u, axis=1).mean() / np.linalg.norm(f, axis=1).sum()
+        if _zero_joint_force_feasible(n, u, 0.95 * mu):
+            assert work < 1e-3, (trial, work)
+            checked["zero"] += 1
+        elif not _zero_joint_force_feasible(n, u, mu / np.cos(np.pi / 8)):
+            assert work > 1e-3, (trial, work)
+            checked["nonzero"] += 1
+    assert min(checked.values()) >= 3, checked  # both cases were exercised
+
+
+def test_grip_forces_on_a_mounted_knob_grip_with_the_full_force():
+    """Two fingertips on a knob 60 deg apart, pushing at its axis: on a free object their forces
+    cannot cancel (tilted apart inside their friction cones they are still 113 deg apart, so at
+    most 1 - cos(56.6 deg) = 45% of the grip is internal) and the squeeze is scaled down; on the knob's hinge they do
+    no work on the joint (its bearing takes the net force), so the squeeze grips with force_n."""
+    from datagen.synth.squeeze import grip_forces, joint_mobility
+
+    a = np.radians([0.0, 60.0])
+    p = torch.tensor(np.stack([0.02 * np.cos(a), 0.02 * np.sin(a), [0.01, 0.01]], 1)[None])
+    n = -p * torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64) / 0.02
+    u = joint_mobility(p, "hinge", (0, 0, 1), (0, 0, 0))
+    free = grip_forces(p, n, 0.5, 10.0)
+    mounted = grip_forces(p, n, 0.5, 10.0, mobility=u, mounted=torch.tensor([True]))
+    assert free.norm(dim=-1).max() < 4.6
+    np.testing.assert_allclose(mounted.norm(dim=-1).max().item(), 10.0, rtol=1e-6)
+    assert abs(float((mounted * u).sum())) < 1e-6 * 10.0  # no torque about the hinge
+    same = grip_forces(p, n, 0.5, 10.0, mobility=u, mounted=torch.tensor([False]))
+    torch.testing.assert_close(same, free)  # samples not on the mounted object: the free rule
