@@ -7,7 +7,10 @@ joint towards the open pose (the naive pregrasp) also moves abduction joints sid
 squeeze pushes fingers across the object and pushes it out of the hand. Here each task
 fingertip's contact sphere instead moves ``distance_m`` straight out along its contact normal at
 the pregrasp, and straight in at the squeeze (``squeeze = 2 grasp - pregrasp``): the squeeze
-forces point along the normals the GWS was computed with.
+forces point along the normals the GWS was computed with. The default "force" mode
+(:func:`force_squeeze`) instead chooses balanced grip forces; on a mounted task object (a hinge
+or a slide) only their net force along the joint's motion must cancel (:func:`joint_mobility`):
+the bearing takes the rest.
 
 The joint displacement is the damped least-squares solution ``dq = J^T (J J^T + lambda^2 I)^-1 e``
 of the fingertips' positional Jacobian ``J (3F, J)`` (joints shared by several fingertips, e.g.
