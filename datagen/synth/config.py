@@ -73,6 +73,7 @@ class SynthConfig(Config):
     seed_halving_iter: int = 0  #: 0: off; else at this iteration (< seed_select_iter) each grasp's better half goes on
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
+    task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     task_seed_score: bool = True  #: gamma < 180, task energy on: seed choice by whole-hand task epsilon, else energy
     seed: int = 0
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from datagen.synth.penetration import sphere_penetration
@@ -30,6 +31,7 @@ from datagen.synth.scenery import Scenery
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
 from datagen.synth.stacked import grid_query
 from datagen.wrench import task_energy
+from datagen.wrench.tws import task_wrench_at_contacts
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
 
@@ -140,16 +142,40 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     )
 
 
-def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor) -> EnergyTerms:
+def task_origins(task, targets, object_index: torch.Tensor, cfg) -> torch.Tensor | None:
+    """``(B, 3)`` m: each sample's object's centre of mass, where the task wrench acts
+    (``cfg.task_wrench_at_com``), for a task with a sector (gamma < 180 deg) on free objects;
+    None otherwise: force closure covers every wrench wherever it acts, and a mounted object's
+    joint (`datagen.tasks.task_test_from_spec`) takes every load but the one along its motion."""
+    if not cfg.task_wrench_at_com or task.gamma_deg >= 180 or cfg.weights.task <= 0:
+        return None
+    from datagen.tasks import task_object, task_test_from_spec
+
+    if task_object(task) is not None:
+        test = task_test_from_spec(task)
+        if test is not None and test.joint != "free":
+            return None
+    com = torch.as_tensor(np.stack([t.centre_of_mass for t in targets]), dtype=torch.float64)
+    return com.to(object_index.device)[object_index]
+
+
+def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
+                   task_origin: torch.Tensor | None = None) -> EnergyTerms:
     """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
+
+    ``task_origin`` ``(B, 3)`` m: where the task wrench acts on each sample's object (its centre of
+    mass, :func:`task_origins`); it is then moved to the contacts (:func:`task_wrench_at_contacts`).
+    None: ``task.w_t`` as given, i.e. at the contact centroid under CPN.
 
     ``E_dist`` aims each contact sphere at a gap of ``-cfg.sphere_margin_m`` (sunk by the margin
     the penetration term allows, since the spheres overshoot the hand's collision shapes).
     """
     w = cfg.weights
     if w.task > 0:
+        w_t = list(task.w_t) if task_origin is None else task_wrench_at_contacts(
+            task.w_t, state.contact_points, task_origin.to(state.contact_points.dtype), normalize=cfg.normalize)
         e_task = task_energy(
-            state.contact_points, state.contact_normals, cfg.mu, list(task.w_t), task.gamma_deg, directions,
+            state.contact_points, state.contact_normals, cfg.mu, w_t, task.gamma_deg, directions,
             kind=cfg.task_energy_kind, delta_deg=cfg.delta_deg, normalize=cfg.normalize,
             contact_model=cfg.contact_model, torsional_mu=cfg.torsional_mu,
         ) / directions.shape[0]

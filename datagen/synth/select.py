@@ -20,6 +20,7 @@ import torch
 
 from datagen.synth.energies import _query_targets, hand_object_state
 from datagen.wrench import epsilon_metric, task_epsilon
+from datagen.wrench.tws import task_wrench_at_contacts
 
 __all__ = ["best_seeds", "link_contacts", "link_epsilon", "seed_scores", "top_seeds"]
 
@@ -43,10 +44,12 @@ def link_contacts(hand, targets, index: torch.Tensor, root: torch.Tensor, joints
 
 
 def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Tensor, mu: float, *,
-                 task: tuple | None = None, **kw) -> torch.Tensor:
+                 task: tuple | None = None, task_origin: torch.Tensor | None = None, **kw) -> torch.Tensor:
     """(B,) epsilon of each sample's touching contacts (0 with fewer than two); ``kw`` as
     :func:`datagen.wrench.epsilon_metric`; ``task = (w_t, gamma_deg)``: the task epsilon
-    (:func:`datagen.wrench.task_epsilon`) instead. Samples are batched by their number of contacts."""
+    (:func:`datagen.wrench.task_epsilon`) instead, with ``task_origin`` ``(B, 3)`` m the point
+    ``w_t`` acts at (:func:`datagen.wrench.tws.task_wrench_at_contacts`; None: the contacts'
+    centroid). Samples are batched by their number of contacts."""
     count = touching.sum(-1)
     eps = torch.zeros(points.shape[0], dtype=torch.float64, device=points.device)
     order = torch.argsort((~touching).to(torch.int8), dim=-1, stable=True)  # touching links first
@@ -57,18 +60,24 @@ def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Te
         idx = order[sel, :m]
         p = torch.gather(points[sel], 1, idx[..., None].expand(-1, -1, 3))
         n = torch.gather(normals[sel], 1, idx[..., None].expand(-1, -1, 3))
-        eps[sel] = (epsilon_metric(p.double(), n.double(), mu, **kw) if task is None
-                    else task_epsilon(p.double(), n.double(), mu, task[0], task[1], **kw))
+        if task is None:
+            eps[sel] = epsilon_metric(p.double(), n.double(), mu, **kw)
+            continue
+        w_t = task[0] if task_origin is None else task_wrench_at_contacts(
+            task[0], p.double(), task_origin[sel].double(), normalize=kw.get("normalize", True))
+        eps[sel] = task_epsilon(p.double(), n.double(), mu, w_t, task[1], **kw)
     return eps
 
 
 def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
-                energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg) -> torch.Tensor:
+                energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg,
+                task_origin: torch.Tensor | None = None) -> torch.Tensor:
     """``(N,)`` how promising each pose is (higher is better): the whole-hand epsilon of poses whose
     task fingertips are in contact -- force closure's (gamma 180 deg), or with the task energy on
     the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by the lower
     energy; the task energy off and gamma < 180 deg: minus the energy. ``root (N, 7)``,
-    ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target."""
+    ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target;
+    ``task_origin`` ``(N, 3)``: where the task wrench acts (:func:`link_epsilon`)."""
     cfg = cfg.for_hand(hand)
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
@@ -80,7 +89,8 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
             eps = link_epsilon(p, n, touching, cfg.mu, normalize=cfg.normalize,
-                               task=None if closure else (task.w_t, task.gamma_deg)).to(energy.dtype)
+                               task=None if closure else (task.w_t, task.gamma_deg),
+                               task_origin=None if closure else task_origin).to(energy.dtype)
             score = score + 1e3 * torch.where(usable, eps, torch.zeros_like(eps))
         return score
 

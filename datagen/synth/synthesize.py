@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import torch
 
 from datagen.synth.config import SynthConfig, TaskSpec
-from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state
+from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state, task_origins
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
 from datagen.synth.scenery import Scenery
@@ -143,6 +143,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
     def energy_on(index):  # one optimizer run on one batch (its own self-collision pair lists)
         self_pairs = SelfPairList(hand, cfg.self_pair_skin_m) if cfg.self_pair_skin_m > 0 else None
+        origin = task_origins(task, targets, index, cfg)
 
         def energy_fn(t, q, j):
             jj = hand.apply_couplings(j)
@@ -150,7 +151,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
                                       scenery=scenery)
-            terms = evaluate_state(state, cfg, task, directions)
+            terms = evaluate_state(state, cfg, task, directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
             return terms.total, extras
@@ -168,7 +169,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         for until, kept in rounds + [(select, min(cfg.seeds_kept, S))]:
             x, e, extras = opt.run(energy_on(run_index), x, until - first, callback=callback, first_iter=first)
             keep = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                                         tip_spheres, task, cfg), K, kept)
+                                         tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K, kept)
             x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
             root, joints, e = root[keep], joints[keep], e[keep]
             extras = {k: v[keep] for k, v in extras.items()}
@@ -177,7 +178,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         x, e, extras = opt.run(energy_on(run_index), x, cfg.iters - first, callback=callback, first_iter=first)
     if K > 1:  # the kept seeds ran to the end: the best of them by the same score
         best = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                                     tip_spheres, task, cfg), K)
+                                     tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K)
         x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
         root, joints = root[best], joints[best]
         extras = {k: v[best] for k, v in extras.items()}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -75,6 +76,15 @@ class GraspTarget:
         mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
         return cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
                              mesh_sha256=processed.mesh_sha256, cache_grid=cache_grid, **kw)
+
+    @functools.cached_property
+    def centre_of_mass(self) -> np.ndarray:
+        """``(3,)`` m, object frame: the centroid of the solid the surface encloses (uniform
+        density; MuJoCo's centre of mass of the convex pieces, whose mass is split by volume, lies
+        within a few millimetres of it)."""
+        mesh = trimesh.Trimesh(self.sdf.vertices.detach().cpu().double().numpy(), self.sdf.faces.cpu().numpy(),
+                               process=False)
+        return np.asarray(mesh.center_mass, dtype=np.float64) * self.scale
 
     def query(self, points: torch.Tensor) -> SDFResult:
         """Signed distance (m, < 0 inside), closest point (m), outward normal for ``(..., 3)`` m."""

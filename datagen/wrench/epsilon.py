@@ -81,14 +81,14 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
         m = p.shape[-2]
         kw = dict(contact_model=contact_model, torsional_mu=torsional_mu, normalize=normalize)
 
-        def objective_and_grad(u, G=G, scale=scale):
+        def objective_and_grad(u, G=G, scale=scale, rows=None):
             s = boundary_from_matrix(G, scale, u, mu, m, 0.0, **kw)  # exact support point = grad h
             h = (u * s).sum(-1)
             if denom is None:
                 return h, s
             with torch.enable_grad():
                 uu = u.detach().requires_grad_(True)
-                c = denom(uu)
+                c = denom(uu) if rows is None else denom(uu, rows)
                 (gc,) = torch.autograd.grad(c.sum(), uu)
             valid = c > 1e-6
             c_safe = torch.where(valid, c, torch.ones_like(c))
@@ -100,21 +100,23 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
         seeds = sample_directions(search.num_samples, generator=gen, device=p.device, dtype=p.dtype)
         one_batch_dim = p.dim() == 3 and not (torch.is_tensor(mu) and mu.dim() > 0)
 
-        if denom is not None:  # the task cosine of each seed direction (the same for every sample)
+        if denom is not None:  # the task cosine of each seed direction, (K,) or per sample (B, K)
             c_seeds = denom(seeds)
             covered = c_seeds > 1e-6  # directions with a positive task cosine
             c_seeds = torch.where(covered, c_seeds, torch.ones_like(c_seeds))
 
-        def starts(Gc, sc):  # the best seed directions of these samples: (u, their values, h's scale)
+        def starts(Gc, sc, part=slice(None)):  # the best seed directions of samples ``part``: (u, values, h's scale)
             h = support_from_matrix(Gc, sc, seeds, mu, m, **kw)  # (..., K): values only, no support points
-            vals = h if denom is None else torch.where(covered, h / c_seeds, torch.full_like(h, math.inf))
+            if denom is not None:  # a task cosine per sample (one task wrench each) or shared
+                cov, cs = (covered[part], c_seeds[part]) if c_seeds.dim() > 1 else (covered, c_seeds)
+            vals = h if denom is None else torch.where(cov, h / cs, torch.full_like(h, math.inf))
             best, idx = vals.topk(search.num_starts, dim=-1, largest=False)  # (..., S)
             u = seeds[idx] if seeds.dim() == 2 else torch.gather(seeds, -2, idx[..., None].expand(*idx.shape, 6))
             return u, best, h.amax(-1)
 
         rows_per_chunk = max(1, SEED_CHUNK_ELEMENTS // (search.num_samples * m))
         if one_batch_dim and p.shape[0] > rows_per_chunk:  # per sample, so chunks give the same values
-            parts = [starts(G[i:i + rows_per_chunk], scale[i:i + rows_per_chunk])
+            parts = [starts(G[i:i + rows_per_chunk], scale[i:i + rows_per_chunk], slice(i, i + rows_per_chunk))
                      for i in range(0, p.shape[0], rows_per_chunk)]
             u, best, h_scale = (torch.cat(x) for x in zip(*parts))
         else:
@@ -125,7 +127,8 @@ def _minimize(points, normals, mu, *, normalize, contact_model, torsional_mu, se
             if rows.numel() < p.shape[0]:  # descend only where the minimum can still be > 0
                 if rows.numel():
                     Gr, sr = G[rows], scale[rows]
-                    ur, vr = _descend(lambda x: objective_and_grad(x, Gr, sr), u[rows], best_u[rows], best_v[rows], search)
+                    ur, vr = _descend(lambda x: objective_and_grad(x, Gr, sr, rows), u[rows], best_u[rows], best_v[rows],
+                                      search)
                     best_u, best_v = best_u.index_copy(0, rows, ur), best_v.index_copy(0, rows, vr)
                 return _best(best_u, best_v, h_scale)
         best_u, best_v = _descend(objective_and_grad, u, best_u, best_v, search)
@@ -211,12 +214,15 @@ def task_epsilon(
     """Task epsilon ``epsilon_t`` of eq. 3: the smallest GWS radius over the TWS sector, ``(...)``.
 
     ``epsilon_t = min_{t in W_t(w_t, gamma)} max{q : q t in GWS}``; 0 when some task direction
-    is not covered by the GWS. ``gamma_deg = 180`` gives :func:`epsilon_metric`.
+    is not covered by the GWS. ``gamma_deg = 180`` gives :func:`epsilon_metric`. ``w_t``: ``(6,)``,
+    or ``(B, 6)`` one per sample of points ``(B, m, 3)``.
     """
     _check_inputs(points, normals, mu, contact_model, torsional_mu)
 
-    def denom(u):
-        return task_support_cosine(u, w_t, gamma_deg)
+    w_rows = torch.is_tensor(w_t) and w_t.dim() > 1  # one task wrench per sample
+
+    def denom(u, rows=None):  # rows: the samples u belongs to (a subset of the batch)
+        return task_support_cosine(u, w_t[rows] if rows is not None and w_rows else w_t, gamma_deg)
 
     u_star, h_scale, best = _minimize(
         points, normals, mu, normalize=normalize, contact_model=contact_model,

@@ -13,7 +13,7 @@ import torch
 from datagen.wrench._geometry import safe_norm, safe_normalize, tiny_for
 from datagen.wrench.gws import grasp_wrench_boundary
 
-__all__ = ["TASK_ENERGY_KINDS", "task_wrench_support", "task_support_cosine", "task_energy"]
+__all__ = ["TASK_ENERGY_KINDS", "task_wrench_support", "task_support_cosine", "task_energy", "task_wrench_at_contacts"]
 
 TASK_ENERGY_KINDS = ("cos", "l2")
 
@@ -33,6 +33,27 @@ def _sector_geometry(directions: torch.Tensor, w_t, gamma_deg):
     if bool(((gamma < 0) | (gamma > math.pi)).any()):
         raise ValueError(f"gamma_deg must lie in [0, 180], got {gamma_deg}")
     return w[..., None, :], gamma[..., None]
+
+
+def task_wrench_at_contacts(w_t, points: torch.Tensor, origin: torch.Tensor, *, normalize: bool = True) -> torch.Tensor:
+    """``(..., 6)`` unit task wrench ``w_t`` ``[f, tau]`` acting at ``origin`` ``(..., 3)`` m (e.g. the
+    object's centre of mass, where a task test applies its disturbance), expressed in the
+    coordinates of the grasp wrench space of contacts ``points`` ``(..., m, 3)`` m: with CPN
+    (``normalize``) torques about the contact centroid ``c`` over the contacts' mean distance
+    ``d`` from it, ``[f, (tau + (origin - c) x f) / d]``; without, torques about the frame origin,
+    ``[f, tau + origin x f]``. A pure torque keeps its direction; a force gains the moment of its
+    lever arm from the grasp, which the contacts must then resist as well.
+    """
+    w = safe_normalize(torch.as_tensor(w_t, dtype=points.dtype, device=points.device))
+    w = w.expand(*points.shape[:-2], 6)
+    f, tau = w[..., :3], w[..., 3:]
+    if normalize:
+        centre = points.mean(dim=-2)
+        d = safe_norm(points - centre[..., None, :], dim=-1).mean(dim=-1)
+        d = torch.where(d > tiny_for(points.dtype), d, torch.ones_like(d))[..., None]
+    else:
+        centre, d = torch.zeros_like(origin), 1.0
+    return safe_normalize(torch.cat([f, (tau + torch.linalg.cross(origin - centre, f)) / d], -1))
 
 
 def task_support_cosine(directions: torch.Tensor, w_t, gamma_deg) -> torch.Tensor:

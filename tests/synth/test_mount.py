@@ -54,3 +54,33 @@ def test_free_objects_and_force_closure_have_no_mount():
     assert _mount(load_task("force_closure"), [SimpleNamespace(object_id="anything")], idx) is None
     # a mounted task whose object is not in the batch
     assert _mount(load_task("turn_knob2"), [SimpleNamespace(object_id="other")], idx) is None
+
+
+def test_centre_of_mass_is_mujocos_and_task_origins_follow_the_config(tmp_path):
+    """The handbag's centre of mass from its surface (`GraspTarget.centre_of_mass`) against
+    MuJoCo's, whose mass is split over the convex pieces by volume; the task wrench acts there
+    only for a free object with a sector and ``task_wrench_at_com`` (the handbag's YAML sets it)."""
+    from datagen.synth import GraspTarget, SynthConfig
+    from datagen.synth.energies import task_origins
+
+    name = "handbag"
+    processed = process_object(resolve("tasks", name, T.object_id(name)), root=tmp_path)
+    scale = T.build(name).scale_m
+    target = GraspTarget.from_processed(processed, scale, cache_grid=False, grid_resolution=16)
+    cfg = EvalConfig()
+    scene = build_scene(load_hand("shadow"), pieces_from_processed(processed, scale), cfg, cfg.task_test("lift_handbag"))
+    d = mujoco.MjData(scene.model)
+    mujoco.mj_forward(scene.model, d)
+    np.testing.assert_allclose(target.centre_of_mass, d.xipos[scene.object_body], atol=3e-3)
+    assert abs(target.centre_of_mass[2]) > 0.02  # well below the bounding box's centre: the strap is light
+
+    idx = torch.tensor([0, 0, 0])
+    bag = load_task("lift_handbag")
+    on = SynthConfig.from_dict(bag.synth_settings({}))
+    assert on.task_wrench_at_com
+    origin = task_origins(bag, [target], idx, on)
+    np.testing.assert_allclose(origin.numpy(), np.tile(target.centre_of_mass, (3, 1)))
+    assert task_origins(bag, [target], idx, SynthConfig()) is None  # the default: at the contacts
+    assert task_origins(bag, [target], idx, SynthConfig.from_dict({"task_wrench_at_com": True, "weights": {"task": 0.0}})) is None
+    for task in ("turn_knob2", "precision_key"):  # mounted; force closure's whole sphere
+        assert task_origins(load_task(task), [target], idx, SynthConfig(task_wrench_at_com=True)) is None

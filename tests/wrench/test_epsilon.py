@@ -183,3 +183,19 @@ def test_seed_evaluation_in_chunks_gives_the_same_values(monkeypatch):
     monkeypatch.setattr(eps_mod, "SEED_CHUNK_ELEMENTS", 2 * EpsilonSearch().num_samples * 4)
     assert torch.equal(epsilon_metric(P, N, 1.0), whole) and whole[2].item() == 0.0
     assert torch.equal(task_epsilon(P, N, 1.0, [0, 0, 0, 0, 0, 1], 60.0), whole_t)
+
+
+def test_task_epsilon_with_one_task_wrench_per_sample_equals_one_at_a_time(monkeypatch):
+    """(B, 6) task wrenches (one per sample, e.g. moved to each grasp's contacts) give each
+    sample's own task epsilon, also when the seed directions are evaluated in chunks of rows."""
+    import datagen.wrench.epsilon as E
+
+    g = torch.Generator().manual_seed(0)
+    p = torch.randn(5, 4, 3, generator=g, dtype=torch.float64) * 0.03
+    n = -p / p.norm(dim=-1, keepdim=True)
+    w = torch.randn(5, 6, generator=g, dtype=torch.float64)
+    single = torch.stack([task_epsilon(p[i:i + 1], n[i:i + 1], 0.5, w[i].tolist(), 30.0)[0] for i in range(5)])
+    assert (single > 0).sum() >= 2 and (single == 0).sum() >= 1  # both kinds of sample
+    torch.testing.assert_close(task_epsilon(p, n, 0.5, w, 30.0), single)
+    monkeypatch.setattr(E, "SEED_CHUNK_ELEMENTS", 2 * E.EpsilonSearch().num_samples * 4)  # two rows a chunk
+    torch.testing.assert_close(task_epsilon(p, n, 0.5, w, 30.0), single)

@@ -135,3 +135,41 @@ def test_bad_task_arguments():
         task_wrench_support(u, [1, 0, 0], 30.0)
     with pytest.raises(ValueError, match="kind"):
         task_energy(torch.zeros(2, 3), torch.ones(2, 3), 0.5, [1, 0, 0, 0, 0, 0], 30.0, u.float(), kind="l1")
+
+
+@pytest.mark.parametrize("normalize", [True, False])
+def test_task_wrench_at_contacts_is_the_wrench_the_contact_forces_make(normalize):
+    """Contact forces whose resultant about ``origin`` is the task wrench: mapped through the
+    grasp matrix (the GWS's own coordinates), they give the direction `task_wrench_at_contacts`
+    returns. The resultant is plain statics (numpy sums of forces and moments)."""
+    from datagen.wrench.gws import grasp_matrix
+    from datagen.wrench.tws import task_wrench_at_contacts
+
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        p = rng.normal(size=(4, 3)) * 0.03 + rng.normal(size=3) * 0.05
+        n = rng.normal(size=(4, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        f = rng.normal(size=(4, 3))
+        origin = rng.normal(size=3) * 0.05
+        w = np.concatenate([f.sum(0), np.cross(p - origin, f).sum(0)])  # the forces' wrench about origin
+        G, _ = grasp_matrix(torch.tensor(p), torch.tensor(n), normalize=normalize)
+        from datagen.wrench._geometry import tangent_basis
+
+        d, e = (x.numpy() for x in tangent_basis(torch.tensor(n)))
+        local = np.stack([(f * n).sum(1), (f * d).sum(1), (f * e).sum(1)], 1).reshape(-1)  # (n, d, e) per contact
+        in_gws = G.numpy() @ local
+        got = task_wrench_at_contacts(w.tolist(), torch.tensor(p), torch.tensor(origin), normalize=normalize).numpy()
+        np.testing.assert_allclose(got, in_gws / np.linalg.norm(in_gws), atol=1e-9)
+
+
+def test_task_wrench_at_contacts_keeps_a_pure_torque_and_batches():
+    from datagen.wrench.tws import task_wrench_at_contacts
+
+    p = torch.randn(3, 4, 3, dtype=torch.float64) * 0.02
+    origin = torch.randn(3, 3, dtype=torch.float64) * 0.1
+    w = task_wrench_at_contacts([0, 0, 0, 0, 0, 2.0], p, origin)
+    torch.testing.assert_close(w, torch.tensor([[0, 0, 0, 0, 0, 1.0]] * 3, dtype=torch.float64))
+    # a force acting at the contacts' centroid is unchanged
+    w = task_wrench_at_contacts([0, 0, 1.0, 0, 0, 0], p, p.mean(1))
+    torch.testing.assert_close(w, torch.tensor([[0, 0, 1.0, 0, 0, 0]] * 3, dtype=torch.float64))
