@@ -10,8 +10,9 @@ the grasps that hold in MuJoCo from those that do not better than the fingertips
 (AUC 0.85 vs 0.76 on 224 Shadow grasps; benchmarks/results/quality.md), because phalanges and the
 palm also take load once the hand closes. Other tasks (gamma < 180 deg) keep, when the task
 energy is on (``weights.task > 0``), the seed whose whole-hand contacts resist the task best: the
-task epsilon (eq. 3, the smallest GWS radius over the TWS sector) of the same link contacts; with
-the task energy off (the paper's baseline) nothing task-specific is used and the lowest energy wins.
+task epsilon (eq. 3, the smallest GWS radius over the TWS sector) of the same link contacts. With
+the task energy off (the paper's baseline) nothing task-specific is used, for force closure's
+sphere (the precision grasps) as for a sector: the lowest energy wins.
 """
 
 from __future__ import annotations
@@ -72,17 +73,17 @@ def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Te
 def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
                 energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg,
                 task_origin: torch.Tensor | None = None) -> torch.Tensor:
-    """``(N,)`` how promising each pose is (higher is better): the whole-hand epsilon of poses whose
-    task fingertips are in contact -- force closure's (gamma 180 deg), or with the task energy on
-    the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by the lower
-    energy; the task energy off and gamma < 180 deg: minus the energy. ``root (N, 7)``,
+    """``(N,)`` how promising each pose is (higher is better): with the task energy on, the
+    whole-hand epsilon of poses whose task fingertips are in contact -- force closure's (gamma 180
+    deg), or the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by
+    the lower energy; with the task energy off: minus the energy. ``root (N, 7)``,
     ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target;
     ``task_origin`` ``(N, 3)``: where the task wrench acts (:func:`link_epsilon`)."""
     cfg = cfg.for_hand(hand)
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         closure = task.gamma_deg >= 180
-        by_epsilon = closure or (cfg.weights.task > 0 and cfg.task_seed_score)
+        by_epsilon = cfg.weights.task > 0 and (closure or cfg.task_seed_score)
         if by_epsilon and tip_spheres.numel() >= (2 if closure else 1):
             tips = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)

@@ -88,6 +88,10 @@ def test_task_seed_score_is_the_whole_hand_task_epsilon(hand, box):
     assert positive >= 1  # the case is not vacuous
     off = SynthConfig(iters=60, seed=2, weights=EnergyWeights(task=0.0))
     assert torch.allclose(seed_scores(hand, [box], index, root, joints, energy, tips, task, off), -energy / 1e3)
+    # the precision grasps' force closure too: the paper's baseline uses no task prior at all
+    key = load_task("precision_key")
+    key_tips = contact_sphere_index(hand)[[hand.fingertip_names.index(f) for f in key.fingers]]
+    assert torch.allclose(seed_scores(hand, [box], index, root, joints, energy, key_tips, key, off), -energy / 1e3)
 
 
 def test_link_contacts_are_surface_points_of_touching_links(hand, box):
