@@ -65,23 +65,23 @@ def _balance(f: torch.Tensor, unit_mobility: torch.Tensor | None = None) -> torc
 
 def grip_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, force_n: float,
                 min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None,
-                mobility: torch.Tensor | None = None, mounted: torch.Tensor | None = None,
-                scale_count: int | None = None) -> torch.Tensor:
+                mount: tuple | None = None, scale_count: int | None = None) -> torch.Tensor:
     """``(B, C, 3)`` N: the :func:`balanced_forces` of each sample, scaled so that the largest of
     its first ``scale_count`` contacts (all: None) is ``force_n`` times the set's balance
-    (:func:`_balance`). ``mobility`` ``(B, C, 3)`` and ``mounted`` ``(B,)`` bool: the samples on a
-    mounted object balance only the force along its joint (None: every sample is free)."""
-    kw = dict(min_normal=min_normal, active=active)
-    f = balanced_forces(points, inward_normals, mu, **kw)
+    (:func:`_balance`). ``mount`` ``(kind, axis, anchor_m, mounted (B,) bool)``: the samples on a
+    mounted object balance only the force along its joint (:func:`joint_mobility`; None: every
+    sample is free)."""
+    mounted = torch.zeros(points.shape[0], dtype=torch.bool, device=points.device) if mount is None else mount[3]
     on = points.new_ones(points.shape[:2]) if active is None else active.to(points.dtype)
-    u = None
-    if mobility is not None and mounted is not None and bool(mounted.any()):
-        rows = mounted.nonzero().squeeze(-1)
-        sub = {k: None if v is None else v[rows] for k, v in kw.items()}
-        f = f.clone()
-        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=mobility[rows], **sub)
-        u = torch.where(mounted[:, None, None], _unit_mobility(mobility, on), torch.zeros_like(mobility))
-    balance = _balance(f) if u is None else torch.where(mounted, _balance(f, u), _balance(f))
+    f = torch.empty_like(points)
+    balance = points.new_empty(points.shape[0])
+    for rows, joint in ((~mounted).nonzero().squeeze(-1), None), (mounted.nonzero().squeeze(-1), mount):
+        if rows.numel() == 0:
+            continue
+        sub = {k: None if v is None else v[rows] for k, v in dict(min_normal=min_normal, active=active).items()}
+        u = None if joint is None else joint_mobility(points[rows], *joint[:3])
+        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=u, **sub)
+        balance[rows] = _balance(f[rows], None if u is None else _unit_mobility(u, on[rows]))
     k = f.shape[1] if scale_count is None else scale_count
     return f * (force_n * balance / f[:, :k].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
 
@@ -258,8 +258,7 @@ def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                   points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
                   approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
-                  mobility: torch.Tensor | None = None,
-                  mounted: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                  mount: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze makes balanced grip forces.
 
     Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
@@ -271,11 +270,11 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     ``approach_m`` along the normal (the gap between the collision spheres and the hand's real
     geometry). The pregrasp is the mirror image
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
-    ``mobility`` ``(B, F, 3)`` / ``mounted`` ``(B,)``: samples on a mounted object, whose balance
-    counts only the force along its joint (:func:`grip_forces`).
+    ``mount``: the joint of a mounted object and the samples on it, whose balance counts only the
+    force along that joint (:func:`grip_forces`).
     """
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
-    f = grip_forces(points, inward_normals, mu, force_n, mobility=mobility, mounted=mounted)
+    f = grip_forces(points, inward_normals, mu, force_n, mount=mount)
     return _grip(hand, joints, J, f, J, inward_normals, movable, kp, approach_m, damping_m)
 
 
@@ -283,7 +282,7 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
                  points: torch.Tensor, inward_normals: torch.Tensor, link_points: torch.Tensor,
                  link_normals: torch.Tensor, link_touching: torch.Tensor, mu: float, kp: float, force_n: float,
                  approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
-                 mobility_fn=None, mounted: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                 mount: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze balances the whole hand's contacts.
 
     As :func:`force_squeeze`, but the balanced forces are solved over every contact the closed
@@ -295,7 +294,7 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     so the fingertips' forces no longer have to cancel among themselves, and the joint torques
     ``tau = sum_c J_c^T f_c`` include the phalanges' share. The palm (no movable joint) only
     reacts. Scaled so the largest fingertip force is ``force_n`` times the set's balance.
-    ``mobility_fn(points (B, C, 3)) -> (B, C, 3)`` and ``mounted`` ``(B,)``: as in :func:`force_squeeze`.
+    ``mount``: as in :func:`force_squeeze`.
     """
     B, F = points.shape[:2]
     tip_links = hand.sphere_link_index[tip_spheres]  # (F,)
@@ -305,8 +304,7 @@ def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_sphere
     N = torch.cat([inward_normals, link_normals], 1)
     active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), others], 1)
     lo = torch.cat([P.new_ones(B, F), P.new_zeros(B, links.shape[0])], 1)
-    f = grip_forces(P, N, mu, force_n, min_normal=lo, active=active, scale_count=F, mounted=mounted,
-                    mobility=None if mobility_fn is None else mobility_fn(P))
+    f = grip_forces(P, N, mu, force_n, min_normal=lo, active=active, scale_count=F, mount=mount)
     all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
     Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
     Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
@@ -329,20 +327,14 @@ def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inwa
     ``(kind, axis, anchor_m, mounted (B,) bool)``, the joint of a mounted task object and the
     samples on it (None: every object is free); the "force" and "hand" modes then balance only
     the force along that joint."""
-    mobility_fn, mounted = None, None
-    if mount is not None:
-        kind, axis, anchor, mounted = mount
-        mobility_fn = lambda p: joint_mobility(p, kind, axis, anchor)  # noqa: E731
     if cfg.squeeze_mode == "hand":
         if link_contacts is None:
             raise ValueError("squeeze_mode 'hand' needs the links' contacts")
         return hand_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, *link_contacts, cfg.mu,
-                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable,
-                            mobility_fn=mobility_fn, mounted=mounted)
+                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable, mount=mount)
     if cfg.squeeze_mode == "force":
         return force_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, cfg.mu, cfg.squeeze_kp,
-                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable,
-                             mobility=None if mobility_fn is None else mobility_fn(points), mounted=mounted)
+                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable, mount=mount)
     if cfg.squeeze_mode == "normal":
         return normal_squeeze(hand, root_pose, joints, tip_spheres, inward_normals, cfg.squeeze_m, movable)
     return joint_squeeze(hand, joints, cfg.squeeze_rad)

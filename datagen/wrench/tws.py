@@ -10,7 +10,7 @@ import math
 
 import torch
 
-from datagen.wrench._geometry import safe_norm, safe_normalize, tiny_for
+from datagen.wrench._geometry import normalize_contact_positions, safe_norm, safe_normalize, tiny_for
 from datagen.wrench.gws import grasp_wrench_boundary
 
 __all__ = ["TASK_ENERGY_KINDS", "task_wrench_support", "task_support_cosine", "task_energy", "task_wrench_at_contacts"]
@@ -47,10 +47,10 @@ def task_wrench_at_contacts(w_t, points: torch.Tensor, origin: torch.Tensor, *, 
     w = safe_normalize(torch.as_tensor(w_t, dtype=points.dtype, device=points.device))
     w = w.expand(*points.shape[:-2], 6)
     f, tau = w[..., :3], w[..., 3:]
-    if normalize:
+    if normalize:  # the grasp matrix's own CPN: its centroid and length (0 for coincident contacts)
         centre = points.mean(dim=-2)
-        d = safe_norm(points - centre[..., None, :], dim=-1).mean(dim=-1)
-        d = torch.where(d > tiny_for(points.dtype), d, torch.ones_like(d))[..., None]
+        _, d = normalize_contact_positions(points)
+        d = torch.where(d > 0, d, torch.ones_like(d))[..., None]
     else:
         centre, d = torch.zeros_like(origin), 1.0
     return safe_normalize(torch.cat([f, (tau + torch.linalg.cross(origin - centre, f)) / d], -1))

@@ -15,6 +15,15 @@ def hand():
     return load_hand("shadow")
 
 
+def _pyramid_edges(ni: np.ndarray, edge_radius: float) -> list[np.ndarray]:
+    """The 8 edges ``n + edge_radius * t`` of a contact's friction pyramid (t a unit tangent at
+    multiples of 45 deg)."""
+    t1 = np.cross(ni, [1.0, 0, 0] if abs(ni[0]) < 0.9 else [0, 1.0, 0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(ni, t1)
+    return [ni + edge_radius * (np.cos(a) * t1 + np.sin(a) * t2) for a in 2 * np.pi * np.arange(8) / 8]
+
+
 def _zero_wrench_feasible(p: np.ndarray, n: np.ndarray, edge_radius: float) -> bool:
     """LP over 8-edge pyramids: do forces with every normal part >= 1 and zero net wrench exist?
 
@@ -24,13 +33,7 @@ def _zero_wrench_feasible(p: np.ndarray, n: np.ndarray, edge_radius: float) -> b
     F = len(p)
     cols = []
     for pi, ni in zip(p, n):
-        t1 = np.cross(ni, [1.0, 0, 0] if abs(ni[0]) < 0.9 else [0, 1.0, 0])
-        t1 /= np.linalg.norm(t1)
-        t2 = np.cross(ni, t1)
-        for k in range(8):
-            a = 2 * np.pi * k / 8
-            d = ni + edge_radius * (np.cos(a) * t1 + np.sin(a) * t2)
-            cols.append(np.concatenate([d, np.cross(pi - p.mean(0), d)]))
+        cols += [np.concatenate([d, np.cross(pi - p.mean(0), d)]) for d in _pyramid_edges(ni, edge_radius)]
     A_eq = np.array(cols).T  # (6, 8F)
     A_ub = np.zeros((F, 8 * F))  # -(normal part of contact i) <= -1
     for i in range(F):
@@ -335,12 +338,7 @@ def _zero_joint_force_feasible(n: np.ndarray, u: np.ndarray, edge_radius: float)
     F = len(n)
     cols = []
     for ni, ui in zip(n, u):
-        t1 = np.cross(ni, [1.0, 0, 0] if abs(ni[0]) < 0.9 else [0, 1.0, 0])
-        t1 /= np.linalg.norm(t1)
-        t2 = np.cross(ni, t1)
-        for k in range(8):
-            a = 2 * np.pi * k / 8
-            cols.append((ni + edge_radius * (np.cos(a) * t1 + np.sin(a) * t2)) @ ui)
+        cols += [d @ ui for d in _pyramid_edges(ni, edge_radius)]
     A_ub = np.zeros((F, 8 * F))
     for i in range(F):
         A_ub[i, 8 * i:8 * i + 8] = -1.0
@@ -392,10 +390,13 @@ def test_grip_forces_on_a_mounted_knob_grip_with_the_full_force():
     p = torch.tensor(np.stack([0.02 * np.cos(a), 0.02 * np.sin(a), [0.01, 0.01]], 1)[None])
     n = -p * torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64) / 0.02
     u = joint_mobility(p, "hinge", (0, 0, 1), (0, 0, 0))
+    hinge = ("hinge", (0, 0, 1), (0, 0, 0))
     free = grip_forces(p, n, 0.5, 10.0)
-    mounted = grip_forces(p, n, 0.5, 10.0, mobility=u, mounted=torch.tensor([True]))
+    mounted = grip_forces(p, n, 0.5, 10.0, mount=(*hinge, torch.tensor([True])))
     assert free.norm(dim=-1).max() < 4.6
     np.testing.assert_allclose(mounted.norm(dim=-1).max().item(), 10.0, rtol=1e-6)
     assert abs(float((mounted * u).sum())) < 1e-6 * 10.0  # no torque about the hinge
-    same = grip_forces(p, n, 0.5, 10.0, mobility=u, mounted=torch.tensor([False]))
+    same = grip_forces(p, n, 0.5, 10.0, mount=(*hinge, torch.tensor([False])))
     torch.testing.assert_close(same, free)  # samples not on the mounted object: the free rule
+    both = grip_forces(p.expand(2, -1, -1), n.expand(2, -1, -1), 0.5, 10.0, mount=(*hinge, torch.tensor([False, True])))
+    torch.testing.assert_close(both, torch.cat([free, mounted]))  # a mixed batch, row by row
