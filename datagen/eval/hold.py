@@ -14,14 +14,15 @@ thread or on a thread pool (MuJoCo releases the GIL inside ``mj_step``); with
 ``stop_at_first_failure`` every direction stops at the first check where any fails. The
 results are therefore identical, bit for bit, for any number of threads.
 
-Optional early pass (``settle_checks`` > 0, off by default): a held object creeps under its load
-(soft contacts), by ~0.01-0.3 mm and ~0.01-0.1 deg per check on real-object Shadow grasps, slowing
-down, and never comes fully to rest (the hand's joint velocities stay above 3e-3). A direction
-then passes once, at that many consecutive checks, its creep since the previous check, continued
-``settle_safety`` times faster through every remaining check, would still stay below the failure
-thresholds; an object still accelerating (its creep growing) keeps being simulated. It cannot see
-a grasp that sits still and then gives way late in the hold, so it is an approximation of the
-protocol, not the protocol (measured disagreement in EvalConfig and benchmarks/results/eval.md).
+Early pass (``settle_checks`` > 0; on by default, 0 runs the full hold): a held object creeps
+under its load (soft contacts), by ~0.01-0.3 mm and ~0.01-0.1 deg per check on real-object Shadow
+grasps, slowing down, and never comes fully to rest (the hand's joint velocities stay above 3e-3).
+A direction then passes once, at that many consecutive checks, its creep since the previous
+check, continued ``settle_safety`` times faster through every remaining check, would still stay
+below the failure thresholds; an object still accelerating (its creep growing) keeps being
+simulated. A grasp that sits still and then gives way late in the hold (a stick-slip) is what
+it cannot see; the default safety keeps twice the margin such grasps needed on the measured
+rows (EvalConfig, benchmarks/results/eval.md), where its verdicts equal the full hold's.
 """
 
 from __future__ import annotations

@@ -68,18 +68,24 @@ def test_settled_directions_pass_early_with_the_full_holds_verdicts(shadow, eval
             fast = ev.evaluate(pieces, poses)
         assert (fast.success, fast.reason, fast.direction_success) == (full.success, full.reason, full.direction_success)
         assert fast.sim_steps < full.sim_steps
-    # the held box settles after the closing: every direction passes within the first half of the hold
-    with Evaluator(shadow, EvalConfig(settle_checks=2)) as ev:
+    # the held box settles after the closing: every direction passes within the first half of the
+    # hold at the older safety factor 4, and within 70% of it at the default 12
+    with Evaluator(shadow, EvalConfig(settle_checks=2, settle_safety=4.0)) as ev:
         assert ev.evaluate(*good).sim_steps <= 2 * 10 * 10 + 6 * 250
+    assert EvalConfig().settle_checks == 2 and EvalConfig().settle_safety == 12.0  # the default is the early pass
+    with Evaluator(shadow, EvalConfig()) as ev:
+        assert ev.evaluate(*good).sim_steps <= 2 * 10 * 10 + 6 * 350
 
 
+@pytest.mark.parametrize("safety", [4.0, 12.0])
 @pytest.mark.parametrize("force_per_kg, passes", [(0.001, True), (0.03, False)])
-def test_settle_passes_slow_creep_but_keeps_simulating_acceleration(shadow, good, force_per_kg, passes):
+def test_settle_passes_slow_creep_but_keeps_simulating_acceleration(shadow, good, force_per_kg, passes, safety):
     """Free flight of the untouched box under a small force, a hand-computed creep: with
     semi-implicit Euler x_n = a dt^2 n (n - 1) / 2, over the 500 hold steps a = 0.001 m/s^2
     moves it 2.0 mm (passes) and a = 0.03 m/s^2 59.9 mm (fails at the last check). The slow
     one's projected creep at checks 1 and 2 (0.02 mm, 0.06 mm per check, times 4 x 9 and 4 x 8
-    checks left) stays far below 5 cm, so it passes at check 2; the fast one's growing creep
+    checks left at safety 4, 12 x 9 and 12 x 8 at 12: at most 5.8 mm) stays far below 5 cm, so it
+    passes at check 2; the fast one's growing creep
     never settles, and it is simulated to its failure like the full hold."""
     pieces, poses = good
     far = poses.copy()
@@ -87,7 +93,7 @@ def test_settle_passes_slow_creep_but_keeps_simulating_acceleration(shadow, good
     cfg = dict(min_touching_links=0, stop_at_first_failure=False, force_per_kg=force_per_kg)
     with Evaluator(shadow, EvalConfig(**cfg, settle_checks=0)) as ev:
         full = ev.evaluate(pieces, far)
-    with Evaluator(shadow, EvalConfig(**cfg, settle_checks=2)) as ev:
+    with Evaluator(shadow, EvalConfig(**cfg, settle_checks=2, settle_safety=safety)) as ev:
         fast = ev.evaluate(pieces, far)
     assert full.success is passes and fast.success is passes
     assert full.sim_steps == 200 + 6 * 500
