@@ -7,11 +7,14 @@ across jobs; CoACD is measured by bench-objects). Reports validated (simulation-
 is wall time x worker CPUs, the scaling ratio (throughput with two workers / with one), and the
 worker seconds by stage summed from the job ledgers. Ray start-up is inside the wall time.
 
-    python -m benchmarks.bench_pipeline [--scale 4] [--grasps 8] [--default-job 2] [--cold 40] [--out benchmarks/results/pipeline.md]
+    python -m benchmarks.bench_pipeline [--scale 4] [--grasps N] [--default-job 2] [--grasps-sweep 4,8,16,32] [--cold 40] [--out benchmarks/results/pipeline.md]
 
 ``--default-job R`` adds the job `make dataset` runs (the default JobConfig: 6 objects, shard size
 "auto") on 2 workers, warm cache, R runs alternating with the same job at the previous fixed 2 objects
 per shard: validated grasps per core-hour of each, medians.
+
+``--grasps-sweep 4,8,16,32`` adds the default job with each number of grasps per object and
+scale (one run each): the fixed costs of a job and of each object are shared by more grasps.
 
 ``--cold N`` adds the user's-scale view: N objects through a minimal config (1 grasp, 10
 iterations, one start, grid 16^3, one scale) from an empty cache with 2 workers, where object
@@ -107,6 +110,32 @@ def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
     return lines
 
 
+def _grasps_sweep(values: list[int], cache: str | None, tmp: Path) -> list[str]:
+    """The default job with each number of grasps per object and scale, one run each, 2 workers."""
+    if not values:
+        return []
+    rows = []
+    for g in values:
+        cfg = JobConfig(grasps_per_object=g)
+        _warm_cache(cfg, cache)
+        out = tmp / f"sweep{g}"
+        t0 = time.perf_counter()
+        s = run_job(cfg, out, num_cpus=2, cache=cache, progress=False)
+        wall = time.perf_counter() - t0
+        print(f"default job, {g} grasps per object: {wall:.1f} s, {s['success']}/{s['grasps']} successful")
+        rows.append((g, wall, s))
+        shutil.rmtree(out, ignore_errors=True)
+    lines = ["", "## Grasps per object and scale (the default job otherwise), 2 workers", "",
+             f"One run each, in this order: {', '.join(str(g) for g in values)}; objects cache warm; core-hour = wall x 2. "
+             f"The default is {JobConfig().grasps_per_object}.", "",
+             "| grasps per object and scale | wall (s) | grasps | validated | validated / core-hour | grasps / core-hour |",
+             "|---|---|---|---|---|---|"]
+    for g, wall, s in rows:
+        lines.append(f"| {g} | {wall:.1f} | {s['grasps']} | {s['success']} | {s['success'] / (wall * 2 / 3600):.0f} | "
+                     f"{s['grasps'] / (wall * 2 / 3600):.0f} |")
+    return lines
+
+
 def _commit() -> str:
     import subprocess
 
@@ -123,13 +152,16 @@ def _commit() -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", type=int, default=4)
-    ap.add_argument("--grasps", type=int, default=8, help="grasps per object and scale")
+    ap.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: JobConfig's)")
+    ap.add_argument("--grasps-sweep", default="", help="comma-separated grasps per object: the default job with "
+                    "each, one run, 2 workers (e.g. 4,8,16,32)")
     ap.add_argument("--cache", default=None, help="objects cache (default $DATAGEN_CACHE)")
     ap.add_argument("--default-job", type=int, default=0, help="runs per layout of the default job (0: skip it)")
     ap.add_argument("--cold", type=int, default=0, help="objects of the cold-cache minimal job (0: skip it)")
     ap.add_argument("--out", default="benchmarks/results/pipeline.md")
     args = ap.parse_args(argv)
-    cfg = JobConfig(count=args.scale, grasps_per_object=args.grasps, objects_per_shard=1)
+    cfg = JobConfig(count=args.scale, objects_per_shard=1,
+                    **({"grasps_per_object": args.grasps} if args.grasps else {}))
     cache = args.cache or os.environ.get("DATAGEN_CACHE") or None
     t0 = time.perf_counter()
     _warm_cache(cfg, cache)
@@ -145,6 +177,7 @@ def main(argv=None) -> int:
             print(f"{workers} worker(s): {wall:.1f} s, {s['success']}/{s['grasps']} successful")
             shutil.rmtree(out, ignore_errors=True)
         default = _default_job(args.default_job, cache, Path(tmp)) if args.default_job else []
+        sweep = _grasps_sweep([int(g) for g in args.grasps_sweep.split(",") if g], cache, Path(tmp))
         cold = _cold_job(args.cold, Path(tmp)) if args.cold else None
     load = os.getloadavg()
     lines = ["# Dataset pipeline throughput (`make bench-pipeline`)", "",
@@ -185,7 +218,7 @@ def main(argv=None) -> int:
     lines += ["", "Stages: process = objects cache lookup (and isolated CoACD on a miss), target = the "
               "synthesis target of each object (exact SDF, hull samples, the SDF grid read from the grid cache), synth = batched optimization, eval = MuJoCo tests, "
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
-    lines += default
+    lines += default + sweep
     if cold is not None:
         lines += _cold_lines(*cold)
     write_report(args.out, lines + hand_notes(args.out) + [""])

@@ -24,7 +24,7 @@ def register_run(sub: argparse._SubParsersAction) -> None:
                    "(default: shadow)")
     p.add_argument("--tasks", default=None, help="comma-separated task names (`datagen tasks`) or YAML paths "
                    "(default: force_closure)")
-    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: 8)")
+    p.add_argument("--grasps", type=int, default=None, help="grasps per object and scale (default: 16)")
     p.add_argument("--objects-per-shard", type=_per_shard, default=None, metavar="N|auto",
                    help="objects per shard task, or auto (the default): chosen for the object count and the "
                         "worker slots when the job is created, e.g. 3 for the default 6 objects on 2 cores")

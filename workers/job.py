@@ -96,7 +96,7 @@ class JobConfig(Config):
     manifest: str = ""                  #: existing manifest file (its first `count` objects); "" = build
     hand: str = "shadow"                #: built-in hand name or hand spec YAML path
     tasks: tuple[str, ...] | str = ("force_closure",)  #: built-in task names or task YAML paths (one: a string)
-    grasps_per_object: int = 8          #: per object and scale (1 to 10000)
+    grasps_per_object: int = 16         #: per object and scale (1 to 10000); 16: bench-pipeline's sweep
     objects_per_shard: int | str = AUTO  #: objects per shard task, or "auto": chosen when the job is
                                         #: created for its object count and the cluster's worker slots
                                         #: (`shard_size`); job.json records the number chosen
