@@ -159,6 +159,24 @@ def _columns_section(rows: pa.Table | None) -> list[str]:
     return md
 
 
+def _evaluation_line(overrides: dict, job_code: str) -> str:
+    """The MuJoCo test the rows' ``success`` comes from: `EvalConfig` with the job's ``eval``
+    overrides, as this code resolves them (named when it is not the job's own code version)."""
+    from datagen.eval import EvalConfig
+
+    from .job import code_version
+
+    e = EvalConfig.from_dict(overrides, where="job.json config.eval")
+    hold = (f"a direction passes once its creep has settled (early pass: `settle_checks` {e.settle_checks}, "
+            f"`settle_safety` {e.settle_safety:g}; the full hold's verdict on every row measured both ways, "
+            "benchmarks/results/eval.md)" if e.settle_checks else "every passing direction held for the whole time")
+    code = code_version()
+    return (f"- MuJoCo test: six directions ({e.force_per_kg:g} N per kg of object, {e.object_mass_kg:g} kg) or the "
+            f"task's disturbance, for {e.hold_steps * e.timestep_s:g} s; a grasp passes while the object moves less "
+            f"than {e.max_translation_m * 100:g} cm and {e.max_rotation_deg:g} deg; {hold}"
+            + ("" if code == job_code else f" (settings as code `{code}` resolves the job's `eval` overrides)"))
+
+
 def write_report(path: str | Path, renders: int = 6) -> Path:
     """Write JOB/README.md; ``renders`` grasps are drawn (half successes, half failures)."""
     job = JobDir(path)
@@ -176,7 +194,8 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
           f"- shards {s['shards_done']}/{s['shards_total']}{'' if s['complete'] else ' (incomplete)'}; "
           f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
           f"`object_path` points into `objects/` (relative to this directory)",
-          f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()), "",
+          f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()),
+          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), "",
           "## Outcome", ""]
     md += _table(["grasps", "successful", "success rate", "objects failed"],
                  [[s["grasps"], s["success"], f"{s['success_rate']:.1%}", fails.num_rows if fails is not None else 0]])

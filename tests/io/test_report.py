@@ -33,6 +33,10 @@ def test_card(job_dir):
         assert f"| {c.get('unit', '')} |" in line
     rows = pq.read_table(next((job_dir / "shards").glob("*.parquet"))).to_pylist()
     assert f"`{rows[0]['joint_names'][0]}`" in card
+    # the test behind `success`: the tiny job's own hold (hold_steps 50 x 4 ms, TINY_EVAL), the
+    # evaluator's defaults for the rest (thresholds, the early pass)
+    test = next(ln for ln in card.splitlines() if ln.startswith("- MuJoCo test:"))
+    assert "for 0.2 s" in test and "5 cm and 15 deg" in test and "`settle_safety` 12" in test
     pics = sorted((job_dir / "renders").glob("*.png")) if (job_dir / "renders").is_dir() else []
     if pics:
         assert len(pics) == 2
