@@ -166,7 +166,10 @@ def _evaluation_line(overrides: dict, job_code: str) -> str:
 
     from .job import code_version
 
-    e = EvalConfig.from_dict(overrides, where="job.json config.eval")
+    try:
+        e = EvalConfig.from_dict(overrides, where="job.json config.eval")
+    except Exception as exc:  # noqa: BLE001 - a job of other code: its eval block is in the config below
+        return f"- MuJoCo test: as the job's `eval` block below sets it (this code cannot read it: {exc})"
     hold = (f"a direction passes once its creep has settled (early pass: `settle_checks` {e.settle_checks}, "
             f"`settle_safety` {e.settle_safety:g}; the full hold's verdict on every row measured both ways, "
             "benchmarks/results/eval.md)" if e.settle_checks else "every passing direction held for the whole time")
