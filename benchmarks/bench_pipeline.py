@@ -78,6 +78,18 @@ def _cold_lines(cfg: JobConfig, wall: float, s: dict) -> list[str]:
             f"{s['stage_seconds'].get('shard_cpu_s', 0.0):.0f} s.", ""]
 
 
+def _timed_job(cfg: JobConfig, out: Path, cache: str | None, label: str) -> tuple[float, dict, JobConfig]:
+    """(wall s, job status, the config job.json recorded) of one run of ``cfg`` on 2 workers; ``out``
+    is removed afterwards."""
+    t0 = time.perf_counter()
+    s = run_job(cfg, out, num_cpus=2, cache=cache, progress=False)
+    wall = time.perf_counter() - t0
+    used = JobConfig.from_dict(json.loads((out / "job.json").read_text())["config"])
+    print(f"{label}: {wall:.1f} s, {s['success']}/{s['grasps']} successful")
+    shutil.rmtree(out, ignore_errors=True)
+    return wall, s, used
+
+
 def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
     """The default job on 2 workers: shard size auto against 2 per shard, ``runs`` alternating runs each."""
     modes = {"auto": JobConfig(), "2 per shard (the previous default)": JobConfig(objects_per_shard=2)}
@@ -86,13 +98,9 @@ def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
     last = {}
     for r in range(runs):
         for m in (list(modes) if r % 2 == 0 else list(reversed(modes))):
-            out = tmp / "default"
-            t0 = time.perf_counter()
-            s = run_job(modes[m], out, num_cpus=2, cache=cache, progress=False)
-            walls[m].append(time.perf_counter() - t0)
-            last[m] = (s, JobConfig.from_dict(json.loads((out / "job.json").read_text())["config"]))
-            print(f"default job, {m}: {walls[m][-1]:.1f} s, {s['success']}/{s['grasps']} successful")
-            shutil.rmtree(out, ignore_errors=True)
+            wall, s, used = _timed_job(modes[m], tmp / "default", cache, f"default job, {m}")
+            walls[m].append(wall)
+            last[m] = (s, used)
     cfg = modes["auto"]
     lines = ["", "## The default job (`make dataset`), 2 workers", "",
              f"The default JobConfig: {cfg.count} procedural objects at {list(cfg.scales)} m, {cfg.grasps_per_object} "
@@ -114,17 +122,12 @@ def _grasps_sweep(values: list[int], cache: str | None, tmp: Path) -> list[str]:
     """The default job with each number of grasps per object and scale, one run each, 2 workers."""
     if not values:
         return []
+    _warm_cache(JobConfig(), cache)  # the same objects whatever the grasps
     rows = []
     for g in values:
-        cfg = JobConfig(grasps_per_object=g)
-        _warm_cache(cfg, cache)
-        out = tmp / f"sweep{g}"
-        t0 = time.perf_counter()
-        s = run_job(cfg, out, num_cpus=2, cache=cache, progress=False)
-        wall = time.perf_counter() - t0
-        print(f"default job, {g} grasps per object: {wall:.1f} s, {s['success']}/{s['grasps']} successful")
+        wall, s, _ = _timed_job(JobConfig(grasps_per_object=g), tmp / f"sweep{g}", cache,
+                                f"default job, {g} grasps per object")
         rows.append((g, wall, s))
-        shutil.rmtree(out, ignore_errors=True)
     lines = ["", "## Grasps per object and scale (the default job otherwise), 2 workers", "",
              f"One run each, in this order: {', '.join(str(g) for g in values)}; objects cache warm; core-hour = wall x 2. "
              f"The default is {JobConfig().grasps_per_object}.", "",
