@@ -33,7 +33,7 @@ from .job import AUTO, JobConfig, JobDir, JobError, code_version, package_versio
 from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
-           "MAX_RAY_TEMP_LEN", "start_local_ray", "worker_slots"]
+           "MAX_RAY_TEMP_LEN", "start_local_ray", "stop_local_ray", "worker_slots"]
 
 MAX_RAY_TEMP_LEN = 40
 LOOPBACK = "127.0.0.1"  # the local cluster's node address: Ray then listens on loopback only
@@ -158,6 +158,27 @@ def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | 
         log(f"warning: Ray {ray.__version__} put the local cluster on {node_ip}, not on the loopback interface: "
             "its ports listen on every interface; on a shared network, firewall them")
     return tmp if private else None
+
+
+def stop_local_ray(ray) -> None:
+    """``ray.shutdown()`` of a local cluster this process started, 1 s sooner.
+
+    Ray's shutdown stops its processes one after another, each with SIGTERM and up to 1 s to
+    exit. The autoscaler monitor ignores SIGTERM, so every job waited the full second for it (Ray
+    2.60: 1.37 -> 0.33 s per shutdown on the project's machine). A local cluster has one node and
+    never scales: the monitor is killed first, then Ray stops the rest as usual. The monitor is
+    looked up through Ray's private node object; where that is missing (another Ray version),
+    this is plain ``ray.shutdown()``."""
+    node = getattr(getattr(getattr(ray, "_private", None), "worker", None), "_global_node", None)
+    for info in (getattr(node, "all_processes", None) or {}).get("monitor", []):
+        proc = getattr(info, "process", None)
+        try:
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=5)
+        except Exception:  # noqa: BLE001 - ray.shutdown below stops it the slow way
+            pass
+    ray.shutdown()
 
 
 def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_cpus: int | None = None,
@@ -371,6 +392,9 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
         return errors
     finally:
         if started:
-            ray.shutdown()
+            if address and address != "local":
+                ray.shutdown()
+            else:
+                stop_local_ray(ray)
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)

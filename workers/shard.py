@@ -147,7 +147,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     from datagen.objects.process import load_processed
     from datagen.pipeline import BatchObject, run_batch
 
-    t_start, cpu_start = time.perf_counter(), time.process_time()
+    t_start, cpu_start, started = time.perf_counter(), time.process_time(), time.time()
     job = JobDir(job_path)
     cfg = JobConfig.from_dict(cfg_dict)
     pcfg, scfg, ecfg = cfg.build_configs()
@@ -224,6 +224,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
                "success": n_ok, "failures": len(fails), "host": socket.gethostname(), "device": device,
                "timings": {k: round(v, 3) for k, v in timings.items()},
                "wall_s": round(time.perf_counter() - t_start, 3),
+               "started_unix_s": round(started, 3), "finished_unix_s": round(time.time(), 3),
                "cpu_s": round(time.process_time() - cpu_start, 3)}  # this process (not the CoACD children)
     job.record_finished(index, summary)
     progress.set(progress.total)

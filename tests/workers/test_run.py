@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from workers.job import JobDir, JobError
-from workers.run import run_job, start_local_ray
+from workers.run import run_job, start_local_ray, stop_local_ray
 
 from .conftest import comparable_rows, tiny_config
 from .test_shard import run_all
@@ -240,3 +240,39 @@ def test_local_cluster_listens_on_loopback_only(tmp_path):
         ray.shutdown()
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, ended but not yet reaped, counts as ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_stop_local_ray_ends_every_process_it_started(tmp_path):
+    import ray
+
+    job = JobDir(tmp_path / "job")
+    private_tmp = start_local_ray(ray, job, 1, log=lambda *a: None)
+    try:
+        @ray.remote
+        def pid():
+            return os.getpid()
+
+        worker = ray.get(pid.remote())
+        started = _descendants(os.getpid()) - {os.getpid()}
+        names = {Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+                 for p in started if _alive(p)}
+        assert worker in started
+        assert any("autoscaler" in n and "monitor.py" in n for n in names), names  # the one it kills first
+        assert any("raylet" in n for n in names) and any("gcs_server" in n for n in names), names
+    finally:
+        stop_local_ray(ray)
+        if private_tmp:
+            shutil.rmtree(private_tmp, ignore_errors=True)
+    assert not ray.is_initialized()
+    deadline = time.monotonic() + 10  # the workers exit once their raylet has gone
+    while time.monotonic() < deadline and any(_alive(p) for p in started):
+        time.sleep(0.1)
+    assert [p for p in started if _alive(p)] == []
