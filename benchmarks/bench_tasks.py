@@ -299,7 +299,7 @@ def render(records: Path, machine: str) -> str:
     lines += task_definitions() + [""]
     for version in versions:
         recs = [r for r in allrecs if r.get("code_version", "-") == version]
-        lines += [f"# Results at code version {version}", ""]
+        lines += [f"{RESULTS_HEADING}{version}", ""]
         lines += _render_version(recs)
     return "\n".join(lines)
 
@@ -457,6 +457,17 @@ def headline(records: Path, hand: str = "shadow") -> str:
 
 
 NOTES_HEADING = "## Notes (hand-written"
+RESULTS_HEADING = "# Results at code version "
+
+
+def _sections_without_records(old: str, text: str) -> str:
+    """The ``RESULTS_HEADING`` sections of the report ``old`` whose code version has no section in
+    the freshly rendered ``text`` (their records are gone, e.g. in a fresh checkout, whose
+    records directory is empty), in their order: rewriting the report never drops a result."""
+    rendered = {line[len(RESULTS_HEADING):].strip() for line in text.splitlines() if line.startswith(RESULTS_HEADING)}
+    parts = old.split("\n" + RESULTS_HEADING)[1:]
+    return "".join(RESULTS_HEADING + part.rstrip("\n") + "\n\n" for part in parts
+                   if part.split("\n", 1)[0].strip() not in rendered)
 
 
 def write_report(out: Path, text: str, last_line: str) -> None:
@@ -466,6 +477,11 @@ def write_report(out: Path, text: str, last_line: str) -> None:
     old = out.read_text() if out.exists() else ""
     at = old.find(NOTES_HEADING)
     notes = old[at:].rstrip("\n") if at >= 0 else ""
+    kept = _sections_without_records(old[:at] if at >= 0 else old, text)
+    if kept:  # after the header, before the versions rendered from records
+        first = text.find(RESULTS_HEADING)
+        first = len(text) if first < 0 else first
+        text = text[:first] + kept + text[first:]
     if notes.splitlines() and notes.splitlines()[-1].startswith("tasks-generic:"):
         notes = "\n".join(notes.splitlines()[:-1]).rstrip("\n")
     out.parent.mkdir(parents=True, exist_ok=True)

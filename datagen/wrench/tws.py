@@ -27,7 +27,7 @@ def _sector_geometry(directions: torch.Tensor, w_t, gamma_deg):
     w = safe_normalize(_as_batch(w_t, directions))
     if w.shape[-1] != 6:
         raise ValueError(f"w_t must have shape (..., 6), got {tuple(w.shape)}")
-    if float(safe_norm(w).min()) == 0.0:
+    if float(safe_norm(w.detach()).min()) == 0.0:
         raise ValueError("w_t must be a non-zero 6-D wrench direction")
     gamma = torch.deg2rad(_as_batch(gamma_deg, directions))
     if bool(((gamma < 0) | (gamma > math.pi)).any()):
