@@ -146,8 +146,9 @@ def task_for(task_name: str, init: str):
     from datagen.tasks import InitConfig, load_task
 
     spec = load_task(task_name)
-    if init == "generic":
-        return dataclasses.replace(spec, init=InitConfig())
+    if init == "generic":  # every hand starts as for force closure: its `hands:` init fields go, its fingers stay
+        return dataclasses.replace(spec, init=InitConfig(),
+                                   hands={h: dataclasses.replace(o, init={}) for h, o in spec.hands.items()})
     if init != "task":
         raise SystemExit(f"unknown init {init!r}; known: {list(INITS)}")
     return spec
