@@ -254,6 +254,7 @@ def test_stop_local_ray_ends_every_process_it_started(tmp_path):
     import ray
 
     job = JobDir(tmp_path / "job")
+    before = _descendants(os.getpid())  # e.g. an earlier test's pool of isolated processing workers
     private_tmp = start_local_ray(ray, job, 1, log=lambda *a: None)
     try:
         @ray.remote
@@ -261,7 +262,7 @@ def test_stop_local_ray_ends_every_process_it_started(tmp_path):
             return os.getpid()
 
         worker = ray.get(pid.remote())
-        started = _descendants(os.getpid()) - {os.getpid()}
+        started = _descendants(os.getpid()) - before
         names = {Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
                  for p in started if _alive(p)}
         assert worker in started
