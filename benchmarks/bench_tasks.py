@@ -484,6 +484,8 @@ def write_report(out: Path, text: str, last_line: str) -> None:
         first = len(text) if first < 0 else first
         text = text[:first] + kept + text[first:]
     if notes.splitlines() and notes.splitlines()[-1].startswith("tasks-generic:"):
+        if last_line.startswith("tasks-generic: full=- "):  # no generic records here: the old line stands
+            last_line = notes.splitlines()[-1]
         notes = "\n".join(notes.splitlines()[:-1]).rstrip("\n")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text.rstrip("\n") + "\n" + ("\n" + notes + "\n" if notes else "") + "\n" + last_line + "\n")

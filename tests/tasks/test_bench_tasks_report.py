@@ -19,3 +19,11 @@ def test_rewrite_keeps_sections_without_records_and_the_notes(tmp_path):
     assert text.count("# Results at code version") == 3
     assert text.rstrip("\n").splitlines()[-1] == "tasks-generic: full=2 baseline=1"
     assert "full=1 baseline=0" not in text
+
+
+def test_rewrite_without_generic_records_keeps_the_headline(tmp_path):
+    out = tmp_path / "tasks.md"
+    out.write_text("# Title\n\n## Notes (hand-written, kept)\n\n- a note\n\n"
+                   "tasks-generic: full=68.3 baseline=46.8 (ten tasks, shadow, N=100 poses per task, code abc)\n")
+    write_report(out, "# Title\n", "tasks-generic: full=- baseline=- (no complete generic-initialisation run of shadow yet)")
+    assert out.read_text().rstrip("\n").splitlines()[-1].startswith("tasks-generic: full=68.3 baseline=46.8")
