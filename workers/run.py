@@ -167,8 +167,8 @@ def stop_local_ray(ray) -> None:
     exit. The autoscaler monitor ignores SIGTERM, so every job waited the full second for it (Ray
     2.60: 1.37 -> 0.33 s per shutdown on the project's machine). A local cluster has one node and
     never scales: the monitor is killed first, then Ray stops the rest as usual. The monitor is
-    looked up through Ray's private node object; where that is missing (another Ray version),
-    this is plain ``ray.shutdown()``."""
+    looked up through Ray's private node object; where there is none (a driver connected to a
+    cluster owns no Ray process, or another Ray version), this is plain ``ray.shutdown()``."""
     node = getattr(getattr(getattr(ray, "_private", None), "worker", None), "_global_node", None)
     for info in (getattr(node, "all_processes", None) or {}).get("monitor", []):
         proc = getattr(info, "process", None)
@@ -392,9 +392,6 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
         return errors
     finally:
         if started:
-            if address and address != "local":
-                ray.shutdown()
-            else:
-                stop_local_ray(ray)
+            stop_local_ray(ray)  # a driver connected to a cluster owns no Ray process: plain ray.shutdown()
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)
