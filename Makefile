@@ -132,3 +132,9 @@ real-objects: $(STAMP)
 
 bench-quality: $(STAMP) hands real-objects
 	$(PY) -m benchmarks.bench_quality $(BENCH_QUALITY_ARGS)
+
+# `datagen synth --num 100 --iters 500` end to end on pybullet_data meshes, by seeds per grasp,
+# with the success rate each buys -> benchmarks/results/synth_cli.md
+.PHONY: bench-synth-cli
+bench-synth-cli: $(STAMP) real-objects
+	$(PY) -m benchmarks.bench_synth_cli
