@@ -101,7 +101,7 @@ dataset: $(STAMP)
 		--source $(SOURCE) $(DATASET_ARGS)
 
 bench-pipeline: $(STAMP)
-	$(PY) -m benchmarks.bench_pipeline --default-job 2 --grasps-sweep 4,8,16,32 --cold 40
+	$(PY) -m benchmarks.bench_pipeline --default-job 2 --grasps-sweep 4,8,16,32 --cold 40 --ceiling 4
 
 # Task-oriented benchmark (issue 8): paper Table II + hyper-parameter rows -> benchmarks/results/tasks.md.
 # Resumable (records in .cache/bench_tasks); e.g. BENCH_TASKS_ARGS="--tasks turn_knob2 --variants full --num 20"

@@ -16,6 +16,12 @@ per shard: validated grasps per core-hour of each, medians.
 ``--grasps-sweep 4,8,16,32`` adds the default job with each number of grasps per object and
 scale (one run each): the fixed costs of a job and of each object are shared by more grasps.
 
+``--ceiling N`` adds what this machine allows two workers, without Ray: N shards of the small job,
+each run alone in a warm process and then as two copies at once in two processes (one torch
+thread each, as a Ray worker of one CPU has). Two copies of the same work take longer than one
+alone where the cores share caches and memory bandwidth; ``2 x alone / the slower copy`` is the
+best 2-worker / 1-worker ratio any scheduler could reach on this machine for this work.
+
 ``--cold N`` adds the user's-scale view: N objects through a minimal config (1 grasp, 10
 iterations, one start, grid 16^3, one scale) from an empty cache with 2 workers, where object
 processing and the targets dominate, and its extrapolation to 5000 objects.
@@ -97,6 +103,84 @@ def _shard_phase(out: Path) -> float:
     return max(d["finished_unix_s"] for d in done) - min(d["started_unix_s"] for d in done)
 
 
+def _prepared_job(path: Path, cfg: JobConfig) -> list[dict]:
+    """A job directory at ``path`` with its manifest written; the shard entries as `run_shard` takes them."""
+    from workers.run import prepare_manifest
+
+    job = JobDir(path)
+    job.lock()
+    try:
+        job.init(cfg)
+        entries = prepare_manifest(job, cfg)
+    finally:
+        job.unlock()
+    return [{**e.__dict__, "scales": list(e.scales)} for e in entries]
+
+
+def _warm_process(_) -> int:
+    import torch
+
+    import datagen.eval  # noqa: F401 - the imports a Ray worker pays before its first shard
+    import datagen.pipeline  # noqa: F401
+    import workers.shard  # noqa: F401
+
+    torch.set_num_threads(1)
+    return os.getpid()
+
+
+def _shard_seconds(args) -> float:
+    """Wall seconds of `run_shard` ``index`` of the job at ``path`` (entries one per shard)."""
+    from workers.shard import run_shard
+
+    path, index, entries, cfg_d, cache = args
+    t0 = time.perf_counter()
+    run_shard(str(path), index, entries[index:index + 1], cfg_d,
+              {"code_version": "bench", "packages": {}, "created_at": "bench", "cache": cache or ""})
+    return time.perf_counter() - t0
+
+
+def _ceiling(cfg: JobConfig, cache: str | None, tmp: Path, shards: int) -> tuple[list[str], float]:
+    """(report lines, ratio ceiling) of ``--ceiling``: shards alone and as two copies at once."""
+    import multiprocessing as mp
+
+    dirs = [tmp / f"ceiling{k}" for k in (0, 1)]
+    entries = [_prepared_job(d, cfg) for d in dirs]
+    cfg_d = cfg.to_dict()
+    n = min(shards, len(entries[0]))
+    rows = []
+    env = os.environ.get("OMP_NUM_THREADS")
+    os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the spawned processes, as Ray sets it for a 1-CPU task
+    try:
+        with mp.get_context("spawn").Pool(2) as pool:
+            pool.map(_warm_process, [0, 1])
+            last = len(entries[0]) - 1  # one untimed shard in each process: first-call costs (hand, scenes)
+            pool.map(_shard_seconds, [(dirs[k], last, entries[k], cfg_d, cache) for k in (0, 1)])
+            for i in range(n):
+                alone = pool.apply(_shard_seconds, ((dirs[0], i, entries[0], cfg_d, cache),))
+                both = pool.map(_shard_seconds, [(dirs[k], i, entries[k], cfg_d, cache) for k in (0, 1)])
+                rows.append((i, alone, both))
+                print(f"ceiling, shard {i}: alone {alone:.1f} s, two copies at once {both[0]:.1f} / {both[1]:.1f} s")
+    finally:
+        if env is None:
+            os.environ.pop("OMP_NUM_THREADS", None)
+        else:
+            os.environ["OMP_NUM_THREADS"] = env
+    alone_sum = sum(a for _, a, _ in rows)
+    slow_sum = sum(max(b) for _, _, b in rows)
+    ceiling = 2 * alone_sum / slow_sum
+    lines = ["", "## What this machine allows two workers (no Ray)", "",
+             f"{n} shards of the job above, each run alone in a warm process, then as two copies at once in two "
+             "processes (separate job directories; one torch thread each). Both processes first ran one shard "
+             "untimed (imports, the hand, first calls).", "",
+             "| shard | alone (s) | two at once (s) | slowdown of the slower copy |", "|---|---|---|---|"]
+    for i, a, b in rows:
+        lines.append(f"| {i} | {a:.1f} | {b[0]:.1f} / {b[1]:.1f} | {max(b) / a - 1:+.0%} |")
+    lines += ["", f"Ceiling of the 2-worker / 1-worker ratio for this work on this machine (2 x alone / the slower "
+                  f"copy, summed over the shards): **{ceiling:.2f}**. The job's ratios above stay below it by Ray's "
+                  "start-up, the workers' imports and first calls, and shards of unequal length.", ""]
+    return lines, ceiling
+
+
 def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
     """The default job on 2 workers: shard size auto against 2 per shard, ``runs`` alternating runs each."""
     modes = {"auto": JobConfig(), "2 per shard (the previous default)": JobConfig(objects_per_shard=2)}
@@ -170,6 +254,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=None, help="objects cache (default $DATAGEN_CACHE)")
     ap.add_argument("--default-job", type=int, default=0, help="runs per layout of the default job (0: skip it)")
     ap.add_argument("--cold", type=int, default=0, help="objects of the cold-cache minimal job (0: skip it)")
+    ap.add_argument("--ceiling", type=int, default=0, help="shards of the small job run alone and as two copies at "
+                    "once without Ray (0: skip it)")
     ap.add_argument("--out", default="benchmarks/results/pipeline.md")
     args = ap.parse_args(argv)
     cfg = JobConfig(count=args.scale, objects_per_shard=1,
@@ -196,6 +282,7 @@ def main(argv=None) -> int:
         default = _default_job(args.default_job, cache, Path(tmp)) if args.default_job else []
         sweep = _grasps_sweep([int(g) for g in args.grasps_sweep.split(",") if g], cache, Path(tmp))
         cold = _cold_job(args.cold, Path(tmp)) if args.cold else None
+        ceiling = _ceiling(cfg, cache, Path(tmp), args.ceiling)[0] if args.ceiling else []
     load = os.getloadavg()
     lines = ["# Dataset pipeline throughput (`make bench-pipeline`)", "",
              f"Commit {_commit()}.", "",
@@ -246,7 +333,7 @@ def main(argv=None) -> int:
     lines += ["", "Stages: process = objects cache lookup (and isolated CoACD on a miss), target = the "
               "synthesis target of each object (exact SDF, hull samples, the SDF grid read from the grid cache), synth = batched optimization, eval = MuJoCo tests, "
               "write = Parquet. The rest of the wall time is Ray start-up and scheduling.", ""]
-    lines += default + sweep
+    lines += ceiling + default + sweep
     if cold is not None:
         lines += _cold_lines(*cold)
     write_report(args.out, lines + hand_notes(args.out) + [""])
