@@ -210,7 +210,8 @@ class HandModel:
     # ------------------------------------------------------------------ kinematics
     def link_transforms(self, root_pose: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
         """(..., L, 4, 4) world transforms of all links for root_pose (..., 7) and joints (..., J)."""
-        batch = torch.broadcast_shapes(root_pose.shape[:-1], joints.shape[:-1])
+        # numpy's rule, not torch.broadcast_shapes: torch's imports sympy on first use (0.4 s per process)
+        batch = torch.Size(np.broadcast_shapes(root_pose.shape[:-1], joints.shape[:-1]))
         th = joints.expand(batch + joints.shape[-1:]).reshape(-1, joints.shape[-1])[:, self._chain_perm]
         frames = self.chain.forward_kinematics_tensor(th)  # (frames, B, 4, 4), root frame
         local = frames[self._frame_idx].transpose(0, 1)  # (B, L, 4, 4)

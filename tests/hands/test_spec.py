@@ -166,6 +166,9 @@ def test_builtin_specs_round_trip_and_reference_registry_assets(name):
     assert again.to_dict() == spec.to_dict()
     assert again.spheres == spec.spheres and again.self_collision_pairs == spec.self_collision_pairs
     assert builtin_spec_path(name).stat().st_size < 1_000_000
+    # load_spec reads with libyaml where available: the same spec as PyYAML's pure-Python safe_load
+    pure = HandSpec.from_dict(yaml.safe_load(builtin_spec_path(name).read_text()), source_file=builtin_spec_path(name))
+    assert pure.to_dict() == spec.to_dict()
 
 
 def test_no_vendored_assets_in_the_package():
