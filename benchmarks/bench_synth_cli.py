@@ -46,6 +46,13 @@ def _mesh(name: str) -> Path:
     return path
 
 
+def _default_threads() -> int:
+    """torch's default intra-op threads here, which the `datagen synth` subprocess also uses."""
+    import torch
+
+    return torch.get_num_threads()
+
+
 def _cli(*args: str, check: bool = True) -> tuple[float, str]:
     """(wall s, the last "wrote ..." line) of ``python -m datagen.cli ARGS``; raises on failure if ``check``."""
     t0 = time.perf_counter()
@@ -105,7 +112,7 @@ def main(argv=None) -> int:
              f"Commit {code_version()}.", "",
              f"Machine: {header}; load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.", "",
              f"Command: `datagen synth --object MESH --num {args.num} --iters {args.iters} --seeds S` (Shadow, force "
-             "closure, 0.08 m, 2 torch threads), a subprocess timed from start to exit, warm objects cache; wall = "
+             f"closure, 0.08 m, torch's default {_default_threads()} threads), a subprocess timed from start to exit, warm objects cache; wall = "
              f"median of {args.runs} runs, settings alternating. Then `datagen eval --workers 2` (six-direction "
              "test) once per setting: the grasps are the same on every run. Validated / s = grasps that hold per "
              "second of synthesis wall (and of synthesis + evaluation wall).", "",
