@@ -13,6 +13,7 @@ and the caller loops over the targets as before.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 import torch
@@ -21,28 +22,30 @@ import torch.nn.functional as F
 __all__ = ["grid_distance", "grid_query", "per_target_rows", "stacked_distance", "stacked_grids"]
 
 _CACHE: OrderedDict = OrderedDict()  # key -> (targets, values, lo, hi, scale, cell); the last two batches
+_LOCK = threading.Lock()  # parts of one batch run in threads (`datagen.synth.synthesize`)
 
 
 def stacked_grids(targets, dtype: torch.dtype):
     """The targets' grids stacked (cached for the batch), or None if they cannot be."""
-    key = (tuple(id(t) for t in targets), dtype)
-    hit = _CACHE.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], targets)):
-        _CACHE.move_to_end(key)
-        return hit[1:]
-    grids = [t.grid for t in targets]
-    if any(g is None for g in grids) or len({tuple(g.values.shape) for g in grids}) != 1:
-        return None
-    values = torch.stack([g.values.to(dtype) for g in grids]).permute(0, 3, 2, 1)[:, None]  # (T, 1, z, y, x)
-    lo = torch.stack([g.lo.to(dtype) for g in grids])[:, None]  # (T, 1, 3)
-    hi = torch.stack([g.hi.to(dtype) for g in grids])[:, None]
-    scale = torch.tensor([t.scale for t in targets], dtype=dtype, device=values.device)[:, None]  # (T, 1)
-    cell = torch.tensor([float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * t.scale
-                         for g, t in zip(grids, targets)], dtype=dtype, device=values.device)  # (T,) one cell, m
-    _CACHE[key] = (tuple(targets), values, lo, hi, scale, cell)
-    while len(_CACHE) > 2:
-        _CACHE.popitem(last=False)
-    return values, lo, hi, scale, cell
+    with _LOCK:
+        key = (tuple(id(t) for t in targets), dtype)
+        hit = _CACHE.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], targets)):
+            _CACHE.move_to_end(key)
+            return hit[1:]
+        grids = [t.grid for t in targets]
+        if any(g is None for g in grids) or len({tuple(g.values.shape) for g in grids}) != 1:
+            return None
+        values = torch.stack([g.values.to(dtype) for g in grids]).permute(0, 3, 2, 1)[:, None]  # (T, 1, z, y, x)
+        lo = torch.stack([g.lo.to(dtype) for g in grids])[:, None]  # (T, 1, 3)
+        hi = torch.stack([g.hi.to(dtype) for g in grids])[:, None]
+        scale = torch.tensor([t.scale for t in targets], dtype=dtype, device=values.device)[:, None]  # (T, 1)
+        cell = torch.tensor([float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * t.scale
+                             for g, t in zip(grids, targets)], dtype=dtype, device=values.device)  # (T,) one cell, m
+        _CACHE[key] = (tuple(targets), values, lo, hi, scale, cell)
+        while len(_CACHE) > 2:
+            _CACHE.popitem(last=False)
+        return values, lo, hi, scale, cell
 
 
 def per_target_rows(targets, object_index: torch.Tensor) -> int:

@@ -121,13 +121,82 @@ def _mount(task: TaskSpec, targets, object_index: torch.Tensor):
     return (test.joint, test.axis, test.anchor, mounted) if bool(mounted.any()) else None
 
 
+#: rows per Python thread below which a split batch runs slower than one intra-op-threaded batch (its
+#: parts' per-op Python work contends for the GIL): Shadow, 2 cores, 1600 seeds 12.8 -> 10.6 s, 100
+#: poses 3.8 -> 5.5 s (benchmarks/results/synth_cli.md)
+MIN_ROWS_PER_THREAD = 400
+
+
+def _row_parts(index: torch.Tensor, n_targets: int, threads: int) -> list[torch.Tensor]:
+    """Rows of a batch (each row's target in ``index (B,)``) in up to ``threads`` parts of at least
+    ``MIN_ROWS_PER_THREAD`` rows. A batch laid out as ``arange(T).repeat_interleave(R)`` is cut
+    within every target (each part: the same share of every target's rows, so it keeps the layout
+    and the stacked grid queries of `datagen.synth.stacked`); a single target's batch is cut into
+    contiguous ranges; any other layout stays whole. The poses then equal the whole batch's bit for
+    bit (tests/synth/test_multistart.py; parts of one row per target differed by 2e-8)."""
+    from datagen.synth.stacked import per_target_rows
+
+    B = index.shape[0]
+    parts = max(1, min(threads, B // MIN_ROWS_PER_THREAD))
+    R = per_target_rows([None] * n_targets, index) if n_targets > 1 else B
+    if R == 0:
+        return [torch.arange(B, device=index.device)]
+    while R % parts:
+        parts -= 1
+    rows = torch.arange(B, device=index.device).reshape(-1, R)  # (T, R)
+    return [rows[:, R * k // parts:R * (k + 1) // parts].reshape(-1) for k in range(parts)]
+
+
+def _in_threads(fn, parts: list[torch.Tensor]) -> list:
+    """``[fn(rows) for rows in parts]``, the parts at once in Python threads with one intra-op
+    thread each (torch ops release the GIL); a single part runs as is. For per-pose computations."""
+    if len(parts) == 1:
+        return [fn(parts[0])]
+    from concurrent.futures import ThreadPoolExecutor
+
+    before = torch.get_num_threads()
+
+    def one(rows):
+        torch.set_num_threads(1)  # this thread's own ops run on one intra-op thread too
+        return fn(rows)
+
+    torch.set_num_threads(1)
+    try:
+        with ThreadPoolExecutor(len(parts)) as pool:
+            return list(pool.map(one, parts))
+    finally:
+        torch.set_num_threads(before)
+
+
+def _run_split(opt: GroupedDescent, energy_on, x: PoseVariables, index: torch.Tensor, n_targets: int,
+               iters: int, callback, first: int, threads: int):
+    """``opt.run`` over the rows of ``x``, on the CPU in parts at once (`_row_parts`, `_in_threads`):
+    every pose's arithmetic is that of the whole batch's run, so the poses do not depend on
+    ``threads``. ``callback`` sees the first part only."""
+    parts = _row_parts(index, n_targets, threads) if x.translation.device.type == "cpu" else [None]
+    if len(parts) == 1:
+        return opt.run(energy_on(index), x, iters, callback=callback, first_iter=first)
+
+    def part(rows):
+        xs = PoseVariables(x.translation[rows], x.quaternion[rows], x.joints[rows])
+        return opt.run(energy_on(index[rows]), xs, iters, callback=callback if rows is parts[0] else None, first_iter=first)
+
+    out = _in_threads(part, parts)
+    back = torch.argsort(torch.cat(parts))  # concatenated part order -> row order
+    xs = PoseVariables(*(torch.cat([getattr(o[0], f) for o in out])[back] for f in ("translation", "quaternion", "joints")))
+    return xs, torch.cat([o[1] for o in out])[back], {k: torch.cat([o[2][k] for o in out])[back] for k in out[0][2]}
+
+
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
-               generator: torch.Generator | None = None, callback=None) -> SynthesisResult:
-    """Optimize ``num_per_object`` poses on each target; see the module docstring."""
+               generator: torch.Generator | None = None, callback=None, threads: int | None = None) -> SynthesisResult:
+    """Optimize ``num_per_object`` poses on each target; see the module docstring. ``threads``
+    (default: torch's intra-op thread count): on the CPU, a large batch (the seeds' first
+    iterations) runs in up to that many parts at once (`_run_split`; the poses do not depend on it)."""
     import time
 
     t0 = time.perf_counter()
     cfg = cfg.for_hand(hand)
+    threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
     gen = generator or torch.Generator().manual_seed(cfg.seed)
     dev, dt = hand.device, hand.dtype
@@ -167,7 +236,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         rounds = [(cfg.seed_halving_iter, S // 2)] if 0 < cfg.seed_halving_iter < select and S >= 4 else []
         K, run_index = S, seed_index
         for until, kept in rounds + [(select, min(cfg.seeds_kept, S))]:
-            x, e, extras = opt.run(energy_on(run_index), x, until - first, callback=callback, first_iter=first)
+            x, e, extras = _run_split(opt, energy_on, x, run_index, len(targets), until - first, callback, first, threads)
             keep = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
                                          tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K, kept)
             x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
@@ -175,7 +244,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
             extras = {k: v[keep] for k, v in extras.items()}
             first, K, run_index = until, kept, object_index.repeat_interleave(kept)
     if cfg.iters > first:
-        x, e, extras = opt.run(energy_on(run_index), x, cfg.iters - first, callback=callback, first_iter=first)
+        x, e, extras = _run_split(opt, energy_on, x, run_index, len(targets), cfg.iters - first, callback, first, threads)
     if K > 1:  # the kept seeds ran to the end: the best of them by the same score
         best = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
                                      tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K)

@@ -213,3 +213,40 @@ def test_halving_keeps_the_better_half_of_each_grasps_seeds(hand, box):
         want = set(score[b].topk(S // 2).indices.tolist())
         got = {int((t[b * S:(b + 1) * S] - p).norm(dim=-1).argmin()) for p in t_next[b]}
         assert got == want, f"grasp {b}: kept seeds {got}, best by score {want}"
+
+
+def test_seed_stage_split_over_threads_gives_the_same_poses(hand, box, monkeypatch):
+    """The seeds' run split into parts in Python threads (`_in_threads`) must give the poses of the
+    unsplit run bit for bit: two targets (the box and a cylinder: every part takes the same share of
+    each target's rows), 3 grasps x 4 seeds each, seed choice at 8 of 12 iterations; 2 and 3 parts
+    of the 24 seeds (the 6 grasps after the choice stay whole: parts of at least 4 rows). The parts
+    must really have run in threads of their own."""
+    import threading
+
+    import importlib
+
+    synth_mod = importlib.import_module("datagen.synth.synthesize")
+
+    cyl = trimesh.creation.cylinder(radius=0.4, height=1.2, sections=48)
+    cyl.apply_scale(1.0 / np.linalg.norm(0.5 * cyl.extents))
+    targets = [box, GraspTarget.from_mesh(cyl, 0.06, "cyl", grid_resolution=32)]
+    cfg = SynthConfig(iters=12, seeds_per_grasp=4, seed_select_iter=8, seed=5)
+    monkeypatch.setattr(synth_mod, "MIN_ROWS_PER_THREAD", 4)
+    seen = []
+    real_run = GroupedDescent.run
+
+    def run(self, *a, **k):
+        seen.append((a[0] if a else None, threading.get_ident()))
+        return real_run(self, *a, **k)
+
+    monkeypatch.setattr(GroupedDescent, "run", run)
+    one = synthesize(hand, targets, load_task("force_closure"), cfg, 3, threads=1)
+    assert len({t for _, t in seen}) == 1
+    for threads in (2, 3):
+        seen.clear()
+        split = synthesize(hand, targets, load_task("force_closure"), cfg, 3, threads=threads)
+        assert len({t for _, t in seen}) == threads + 1  # the seeds' parts, then the grasps in this thread
+        for name in ("grasp", "squeeze", "pregrasp", "contact_points", "tip_distance", "epsilon"):
+            assert torch.equal(getattr(one, name), getattr(split, name)), name
+        for name, value in one.energies.items():
+            assert torch.equal(value, split.energies[name]), name
