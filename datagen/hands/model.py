@@ -230,20 +230,22 @@ class HandModel:
 
     @staticmethod
     def _apply(T: torch.Tensor, index: torch.Tensor, local: torch.Tensor, direction: bool = False) -> torch.Tensor:
-        # R @ p + t written out column by column, in a links-first layout: the 3 x 4 blocks,
-        # (..., L, 4, 4) -> (L, 4 x B x 3) (column-major per link), are gathered per point along
-        # dim 0, (N, 4, B, 3), so that the gradient scatters back as whole contiguous rows
-        # (index_add_ along a later dim loops over strided slices: 5 ms per column at 1600 Shadow
-        # poses); each column is then scaled by the point's coordinate. The same arithmetic as the
-        # batched 3 x 3 @ 3 x 1 matmul (identical values), without one tiny GEMM per point and pose.
+        # R @ p + t written out column by column, in a links-first layout: each column of the links'
+        # 3 x 4 blocks, (..., L, 4, 4) -> (L, B x 3), is gathered per point along dim 0, (N, B, 3), so
+        # that its gradient scatters back as whole contiguous rows (index_add_ along a later dim
+        # loops over strided slices: 5 ms per column at 1600 Shadow poses); each column is then
+        # scaled by the point's coordinate. The columns are split at link size (their gradients are
+        # stacked there, not at point size: 8 ms per evaluation at 800 Shadow poses). The same
+        # arithmetic as the batched 3 x 3 @ 3 x 1 matmul (identical values), without one tiny GEMM
+        # per point and pose.
         batch, L = T.shape[:-3], T.shape[-3]
-        blocks = T[..., :3, :].reshape(-1, L, 3, 4).permute(1, 3, 0, 2).reshape(L, -1)  # (L, 4 B 3)
-        g = blocks.index_select(0, index).view(len(index), 4, -1, 3)  # (N, 4, B, 3): column j at [:, j]
-        c0, c1, c2, c3 = g.unbind(1)  # unbind, not slices: its gradient is one stack, not 4 zero fills
+        cols = T[..., :3, :].reshape(-1, L, 3, 4).permute(3, 1, 0, 2).reshape(4, L, -1)  # (4, L, B 3)
+        used = cols[:3] if direction else cols  # a direction skips the translation column
+        c = [col.index_select(0, index).view(len(index), -1, 3) for col in used.unbind(0)]  # (N, B, 3) each
         p = local.t()[:, :, None, None]  # (3, N, 1, 1)
-        out = c0 * p[0] + c1 * p[1] + c2 * p[2]  # (N, B, 3)
+        out = c[0] * p[0] + c[1] * p[1] + c[2] * p[2]  # (N, B, 3)
         if not direction:
-            out = out + c3
+            out = out + c[3]
         return out.transpose(0, 1).reshape(batch + (len(index), 3))
 
     def spheres(self, root_pose: torch.Tensor, joints: torch.Tensor,
