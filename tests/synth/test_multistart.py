@@ -250,3 +250,21 @@ def test_seed_stage_split_over_threads_gives_the_same_poses(hand, box, monkeypat
             assert torch.equal(getattr(one, name), getattr(split, name)), name
         for name, value in one.energies.items():
             assert torch.equal(value, split.energies[name]), name
+
+
+def test_row_parts_keep_every_targets_share(monkeypatch):
+    """`_row_parts`: a target-major batch is cut within every target (each part: the same rows of
+    each target, all rows once); a layout of unequal targets stays whole; a batch under
+    2 x MIN_ROWS_PER_THREAD rows stays whole; a single target is cut into contiguous ranges."""
+    import importlib
+
+    synth_mod = importlib.import_module("datagen.synth.synthesize")
+    monkeypatch.setattr(synth_mod, "MIN_ROWS_PER_THREAD", 4)
+    index = torch.arange(3).repeat_interleave(8)  # 3 targets x 8 rows
+    parts = synth_mod._row_parts(index, 3, 2)
+    assert [p.tolist() for p in parts] == [[0, 1, 2, 3, 8, 9, 10, 11, 16, 17, 18, 19],
+                                           [4, 5, 6, 7, 12, 13, 14, 15, 20, 21, 22, 23]]
+    assert len(synth_mod._row_parts(index, 3, 3)) == 2  # 8 rows per target do not split in 3 equal shares
+    assert len(synth_mod._row_parts(torch.tensor([0] * 10 + [1] * 6), 2, 2)) == 1  # unequal targets
+    assert len(synth_mod._row_parts(torch.zeros(7, dtype=torch.long), 1, 2)) == 1  # 7 < 2 x 4
+    assert [p.tolist() for p in synth_mod._row_parts(torch.zeros(8, dtype=torch.long), 1, 2)] == [[0, 1, 2, 3], [4, 5, 6, 7]]
