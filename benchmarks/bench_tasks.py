@@ -552,8 +552,9 @@ def main():
     line = headline(args.records)
     write_report(args.out, render(args.records, machine), line)
     print(f"wrote {args.out}")
-    if headline_s32(args.records):
-        print(headline_s32(args.records))
+    more = headline_s32(args.records)
+    if more:
+        print(more)
     print(line)
 
 

@@ -127,18 +127,18 @@ def _mount(task: TaskSpec, targets, object_index: torch.Tensor):
 MIN_ROWS_PER_THREAD = 400
 
 
-def _row_parts(index: torch.Tensor, n_targets: int, threads: int) -> list[torch.Tensor]:
+def _row_parts(index: torch.Tensor, targets, threads: int) -> list[torch.Tensor]:
     """Rows of a batch (each row's target in ``index (B,)``) in up to ``threads`` parts of at least
     ``MIN_ROWS_PER_THREAD`` rows. A batch laid out as ``arange(T).repeat_interleave(R)`` is cut
     within every target (each part: the same share of every target's rows, so it keeps the layout
     and the stacked grid queries of `datagen.synth.stacked`); a single target's batch is cut into
     contiguous ranges; any other layout stays whole. The poses then equal the whole batch's bit for
-    bit (tests/synth/test_multistart.py; parts of one row per target differed by 2e-8)."""
+    bit (tests/synth/test_multistart.py; parts of one row per target: gradients differed by 3e-8)."""
     from datagen.synth.stacked import per_target_rows
 
     B = index.shape[0]
     parts = max(1, min(threads, B // MIN_ROWS_PER_THREAD))
-    R = per_target_rows([None] * n_targets, index) if n_targets > 1 else B
+    R = per_target_rows(targets, index) if len(targets) > 1 else B
     if R == 0:
         return [torch.arange(B, device=index.device)]
     while R % parts:
@@ -168,13 +168,13 @@ def _in_threads(fn, parts: list[torch.Tensor]) -> list:
         torch.set_num_threads(before)
 
 
-def _run_split(opt: GroupedDescent, energy_on, x: PoseVariables, index: torch.Tensor, n_targets: int,
+def _run_split(opt: GroupedDescent, energy_on, x: PoseVariables, index: torch.Tensor, targets,
                iters: int, callback, first: int, threads: int):
     """``opt.run`` over the rows of ``x``, on the CPU in parts at once (`_row_parts`, `_in_threads`):
     every pose's arithmetic is that of the whole batch's run, so the poses do not depend on
     ``threads``. ``callback`` sees the first part only."""
-    parts = _row_parts(index, n_targets, threads) if x.translation.device.type == "cpu" else [None]
-    if len(parts) == 1:
+    parts = _row_parts(index, targets, threads) if x.translation.device.type == "cpu" else []
+    if len(parts) <= 1:
         return opt.run(energy_on(index), x, iters, callback=callback, first_iter=first)
 
     def part(rows):
@@ -236,7 +236,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         rounds = [(cfg.seed_halving_iter, S // 2)] if 0 < cfg.seed_halving_iter < select and S >= 4 else []
         K, run_index = S, seed_index
         for until, kept in rounds + [(select, min(cfg.seeds_kept, S))]:
-            x, e, extras = _run_split(opt, energy_on, x, run_index, len(targets), until - first, callback, first, threads)
+            x, e, extras = _run_split(opt, energy_on, x, run_index, targets, until - first, callback, first, threads)
             keep = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
                                          tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K, kept)
             x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
@@ -244,7 +244,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
             extras = {k: v[keep] for k, v in extras.items()}
             first, K, run_index = until, kept, object_index.repeat_interleave(kept)
     if cfg.iters > first:
-        x, e, extras = _run_split(opt, energy_on, x, run_index, len(targets), cfg.iters - first, callback, first, threads)
+        x, e, extras = _run_split(opt, energy_on, x, run_index, targets, cfg.iters - first, callback, first, threads)
     if K > 1:  # the kept seeds ran to the end: the best of them by the same score
         best = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
                                      tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K)

@@ -261,10 +261,10 @@ def test_row_parts_keep_every_targets_share(monkeypatch):
     synth_mod = importlib.import_module("datagen.synth.synthesize")
     monkeypatch.setattr(synth_mod, "MIN_ROWS_PER_THREAD", 4)
     index = torch.arange(3).repeat_interleave(8)  # 3 targets x 8 rows
-    parts = synth_mod._row_parts(index, 3, 2)
+    parts = synth_mod._row_parts(index, [None] * 3, 2)
     assert [p.tolist() for p in parts] == [[0, 1, 2, 3, 8, 9, 10, 11, 16, 17, 18, 19],
                                            [4, 5, 6, 7, 12, 13, 14, 15, 20, 21, 22, 23]]
-    assert len(synth_mod._row_parts(index, 3, 3)) == 2  # 8 rows per target do not split in 3 equal shares
-    assert len(synth_mod._row_parts(torch.tensor([0] * 10 + [1] * 6), 2, 2)) == 1  # unequal targets
-    assert len(synth_mod._row_parts(torch.zeros(7, dtype=torch.long), 1, 2)) == 1  # 7 < 2 x 4
-    assert [p.tolist() for p in synth_mod._row_parts(torch.zeros(8, dtype=torch.long), 1, 2)] == [[0, 1, 2, 3], [4, 5, 6, 7]]
+    assert len(synth_mod._row_parts(index, [None] * 3, 3)) == 2  # 8 rows per target do not split in 3 equal shares
+    assert len(synth_mod._row_parts(torch.tensor([0] * 10 + [1] * 6), [None] * 2, 2)) == 1  # unequal targets
+    assert len(synth_mod._row_parts(torch.zeros(7, dtype=torch.long), [None], 2)) == 1  # 7 < 2 x 4
+    assert [p.tolist() for p in synth_mod._row_parts(torch.zeros(8, dtype=torch.long), [None], 2)] == [[0, 1, 2, 3], [4, 5, 6, 7]]
