@@ -148,6 +148,22 @@ def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor,
     return out.index_add(0, rows, ov.square())
 
 
+def _merge_by_pose(a: tuple[torch.Tensor, torch.Tensor], b: tuple[torch.Tensor, torch.Tensor], B: int):
+    """``(rows, pair)`` of two candidate lists merged in (pose, cluster pair, pair) order, each list
+    already in that order and every pose's pairs in one list only (a pose's list is kept whole or
+    made anew): each entry goes to its pose's block at its place within the pose, no sort."""
+    count_a, count_b = torch.bincount(a[0], minlength=B), torch.bincount(b[0], minlength=B)
+    count = count_a + count_b
+    start = torch.cumsum(count, 0) - count  # (B,) each pose's first slot in the merged list
+    rows = torch.empty(int(count.sum()), dtype=a[0].dtype, device=a[0].device)
+    pair = torch.empty_like(rows)
+    for (r, p), c in ((a, count_a), (b, count_b)):
+        # place within its pose = place in its list - the pose's first place in that list
+        slot = start[r] + torch.arange(r.numel(), device=r.device) - (torch.cumsum(c, 0) - c)[r]
+        rows[slot], pair[slot] = r, p
+    return rows, pair
+
+
 class SelfPairList:
     """Per-pose lists of the sphere pairs within ``skin_m`` (m) of overlapping, reused while the
     pose's spheres stay within ``skin_m / 2`` of where they were when its list was made (measured
@@ -179,11 +195,8 @@ class SelfPairList:
             if redo.numel():
                 r_new, p_new = candidate_pairs(self.hand, c[redo], radii, self.skin_m)
                 kept = ~stale[self.rows]
-                rows = torch.cat([self.rows[kept], redo[r_new]])
-                pair = torch.cat([self.pair[kept], p_new])
-                rank = _cluster_bounds(self.hand)["rank"]
-                order = torch.argsort(rows * rank.numel() + rank[pair])
-                self.rows, self.pair = rows[order], pair[order]
+                self.rows, self.pair = _merge_by_pose((self.rows[kept], self.pair[kept]), (redo[r_new], p_new),
+                                                      local.shape[0])
                 self.ref[redo] = local[redo]
                 self.rebuilt += int(redo.numel())
             return self.rows, self.pair

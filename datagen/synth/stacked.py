@@ -91,8 +91,10 @@ def grid_query(targets, object_index: torch.Tensor, points: torch.Tensor):
         h = stack[4]  # (T,) one cell, m
         pd = p.detach()
         offs = torch.eye(3, dtype=p.dtype, device=p.device)[None] * h[:, None, None]  # (T, 3, 3)
-        grad = torch.stack([stacked_distance(stack, pd + offs[:, None, k]) - stacked_distance(stack, pd - offs[:, None, k])
-                            for k in range(3)], dim=-1)
+        P = pd.shape[1]
+        shifted = torch.cat([pd + offs[:, None, k] for k in range(3)] + [pd - offs[:, None, k] for k in range(3)], 1)
+        d6 = stacked_distance(stack, shifted).view(len(targets), 6, P)  # one grid query for the six
+        grad = torch.stack([d6[:, k] - d6[:, k + 3] for k in range(3)], dim=-1)
         nrm = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     d = stacked_distance(stack, p)
     return d.reshape(B, N), (p - d[..., None] * nrm).reshape(B, N, 3), nrm.reshape(B, N, 3)

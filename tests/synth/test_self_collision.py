@@ -104,3 +104,21 @@ def test_synthesis_is_the_same_with_and_without_reused_pair_lists():
     b = synthesize(hand, [target], load_task("force_closure"), dataclasses.replace(cfg, self_pair_skin_m=0.0), 2)
     assert torch.equal(a.grasp, b.grasp) and torch.equal(a.squeeze, b.squeeze)
     assert a.energies["self_penetration"].sum() >= 0
+
+
+def test_merged_pair_lists_are_in_pose_then_pair_order():
+    """Two lists in (pose, rank) order, each pose in one of them: the merge equals a full sort."""
+    from datagen.synth.self_collision import _merge_by_pose
+
+    g = torch.Generator().manual_seed(0)
+    B = 9
+    fresh = torch.rand(B, generator=g) < 0.5  # poses whose list is made anew
+    lists = ([], [])
+    for pose in range(B):
+        pairs = torch.randperm(40, generator=g)[:int(torch.randint(0, 6, (1,), generator=g))].sort().values
+        lists[int(fresh[pose])].append((torch.full_like(pairs, pose), pairs))
+    a, b = [(torch.cat([r for r, _ in x]), torch.cat([p for _, p in x])) for x in lists]
+    rows, pair = _merge_by_pose(a, b, B)
+    order = torch.argsort(torch.cat([a[0], b[0]]) * 40 + torch.cat([a[1], b[1]]))
+    assert torch.equal(rows, torch.cat([a[0], b[0]])[order]) and torch.equal(pair, torch.cat([a[1], b[1]])[order])
+    assert a[0].numel() and b[0].numel()  # both lists had entries

@@ -50,3 +50,17 @@ def test_no_stacking_where_the_layout_or_the_grids_differ():
     assert grid_distance(targets[:1], torch.zeros(12, dtype=torch.long), pts) is None  # one target: no gain
     mixed = _targets((24, 32, 24))
     assert grid_distance(mixed, torch.arange(3).repeat_interleave(4), pts) is None
+
+
+def test_grid_normals_are_the_central_differences_of_the_grid_distance():
+    """`GraspTarget.approx_query` queries the six offset points at once: its normals equal the
+    normalized differences of single-axis grid queries one cell apart, bit for bit."""
+    t = _targets()[0]
+    pts = _points(2, "cpu").detach()
+    g = t.grid
+    h = float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * t.scale
+    axis = torch.eye(3) * h
+    diff = torch.stack([t.distance(pts + axis[k]) - t.distance(pts - axis[k]) for k in range(3)], dim=-1)
+    _, _, n = t.approx_query(pts)
+    assert torch.equal(n, diff / diff.norm(dim=-1, keepdim=True).clamp_min(1e-12))
+    assert float(diff.abs().max()) > 0
