@@ -32,7 +32,7 @@ def test_self_overlap_energy_equals_the_all_pairs_sum(name):
     assert torch.allclose(g_fast, g_brute, rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["allegro", "leap"])
+@pytest.mark.parametrize("name", ["shadow", "allegro", "leap"])
 def test_reused_pair_lists_equal_the_all_pairs_sum_along_a_walk(name):
     """Pair lists kept across calls (SelfPairList) against the all-pairs sum (the oracle) along a
     random walk of the joints and the root with steps of 0.1 to 8 mm-scale: small steps reuse the
