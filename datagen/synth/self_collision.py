@@ -71,8 +71,8 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     ``count (C,)``; ``blocks``, the link pairs as cluster ranges ``(a0, a1, b0, b1)`` whose
     distance matrices, flattened one after another, ``perm (G,)`` reorders into the groups;
     ``reach (G,)`` the two bounding radii's sum (m); ``group_a``, ``group_b (G,)`` each group's
-    two clusters, read directly where ``gather`` (`GATHER_GROUPS_PER_BLOCK`); ``sizes``, ``starts (G,)`` and ``order (P,)``
-    the sphere pairs of each group (CSR); ``rank (P,)`` each pair's position in the
+    two clusters, read directly where ``gather`` (`GATHER_GROUPS_PER_BLOCK`); ``sizes``,
+    ``starts (G,)`` and ``order (P,)`` the sphere pairs of each group (CSR); ``rank (P,)`` each pair's position in the
     (group, pair) order in which overlaps are summed."""
     cached = getattr(hand, "_self_pair_bounds", None)
     if cached is not None and cached["order"].device == hand.self_collision_pairs.device:
@@ -105,7 +105,8 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     perm = torch.tensor([flat_of[(int(owner[x]), int(owner[y]))] + (int(x) - int(lo[owner[x]])) * int(hi[owner[y]] - lo[owner[y]])
                          + int(y) - int(lo[owner[y]]) for x, y in zip(ga.tolist(), gb.tolist())], dtype=torch.long)
     out = {"cluster": link, "count": count, "blocks": blocks, "perm": perm.to(dev), "reach": radius[uniq // L] + radius[uniq % L],
-           "group_a": (uniq // L).to(dev), "group_b": (uniq % L).to(dev), "gather": uniq.numel() <= GATHER_GROUPS_PER_BLOCK * len(blocks),
+           "group_a": (uniq // L).to(dev), "group_b": (uniq % L).to(dev),
+           "gather": uniq.numel() <= GATHER_GROUPS_PER_BLOCK * len(blocks),
            "sizes": sizes, "starts": torch.cumsum(sizes, 0) - sizes, "order": order, "rank": rank}
     hand._self_pair_bounds = out
     return out
@@ -168,7 +169,7 @@ def _merge_by_pose(a: tuple[torch.Tensor, torch.Tensor], b: tuple[torch.Tensor, 
     count_a, count_b = torch.bincount(a[0], minlength=B), torch.bincount(b[0], minlength=B)
     count = count_a + count_b
     start = torch.cumsum(count, 0) - count  # (B,) each pose's first slot in the merged list
-    rows = torch.empty(int(count.sum()), dtype=a[0].dtype, device=a[0].device)
+    rows = torch.empty(a[0].numel() + b[0].numel(), dtype=a[0].dtype, device=a[0].device)
     pair = torch.empty_like(rows)
     for (r, p), c in ((a, count_a), (b, count_b)):
         # place within its pose = place in its list - the pose's first place in that list
