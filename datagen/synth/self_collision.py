@@ -72,8 +72,8 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     distance matrices, flattened one after another, ``perm (G,)`` reorders into the groups;
     ``reach (G,)`` the two bounding radii's sum (m); ``group_a``, ``group_b (G,)`` each group's
     two clusters, read directly where ``gather`` (`GATHER_GROUPS_PER_BLOCK`); ``sizes``,
-    ``starts (G,)`` and ``order (P,)`` the sphere pairs of each group (CSR); ``rank (P,)`` each pair's position in the
-    (group, pair) order in which overlaps are summed."""
+    ``starts (G,)`` and ``order (P,)`` the sphere pairs of each group (CSR); ``rank (P,)`` each
+    pair's position in the (group, pair) order in which overlaps are summed."""
     cached = getattr(hand, "_self_pair_bounds", None)
     if cached is not None and cached["order"].device == hand.self_collision_pairs.device:
         return cached

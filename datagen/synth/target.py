@@ -110,9 +110,8 @@ class GraspTarget:
             g = self.grid
             h = float(((g.hi - g.lo) / (g.values.shape[0] - 1)).max()) * self.scale
             p = points.detach()
-            offs = torch.eye(3, dtype=p.dtype, device=p.device) * h  # (3, 3): one cell along x, y, z
-            shifted = torch.cat([p[None] + offs.view((3,) + (1,) * (p.dim() - 1) + (3,)),
-                                 p[None] - offs.view((3,) + (1,) * (p.dim() - 1) + (3,))])  # (6, ..., 3)
+            offs = (torch.eye(3, dtype=p.dtype, device=p.device) * h).view((3,) + (1,) * (p.dim() - 1) + (3,))
+            shifted = torch.cat([p[None] + offs, p[None] - offs])  # (6, ..., 3): one cell along +-x, y, z
             d6 = self.distance(shifted)  # one grid query for the six (the same value per point)
             grad = torch.stack([d6[k] - d6[k + 3] for k in range(3)], dim=-1)  # contiguous, as the norm below needs
             n = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
