@@ -4,31 +4,41 @@
 #   1. the tests that compare CUDA with the CPU (skipped without a GPU elsewhere)
 #   2. `datagen synth --num 100 --iters 500` on a real mesh (OBJ, default pybullet's mug), three
 #      times: wall time end to end (the first run also processes the mesh) and run-to-run identity
-#   3. the default job's shards in-process (benchmarks/cuda_shards.py: no Ray needed)
+#   3. the default job's shards in-process (benchmarks/cuda_shards.py: no Ray needed), then a
+#      GPU-sized job: BIG objects in one shard (one synthesis batch) with CPUS evaluation processes
 #   4. bench-synth with the throughput-by-batch-size table
-# Each step has its own time limit, so one hang does not take the rest with it.
+# Each step has its own time limit, and all together stop by BUDGET seconds (default 520) after
+# the start, so one hang does not take the rest with it and a lease is not overrun.
 # DEVICE=cpu SMOKE=1 runs the same steps small and on the CPU (a check of this script itself).
 # Where the GPU machine cannot install packages, carry wheels of the project's dependencies
 # (pip download --platform manylinux... for its Python) and the hand asset folders, and put them
 # on PYTHONPATH before running this (benchmarks/results/cuda_check.md says what was carried).
-OUT=${1:-out/cuda}; DEVICE=${DEVICE:-cuda}
+OUT=${1:-out/cuda}; DEVICE=${DEVICE:-cuda}; BUDGET=${BUDGET:-520}
 OBJ=${OBJ:-$(python3 -c "import pybullet_data as p; print(p.getDataPath())")/objects/mug.obj}
-if [ -n "$SMOKE" ]; then NUM=8; ITERS=50; OBJECTS=1; BENCH="--grasps 16 --iters 50 --repeats 1 --iters-k1e4 5 --batches 16"
-else NUM=100; ITERS=500; OBJECTS=6; BENCH="--repeats 3 --batches 100,1000,4000"; fi
+if [ -n "$SMOKE" ]; then NUM=8; ITERS=50; OBJECTS=1; BIG=2; CPUS=2
+  BENCH="--grasps 16 --iters 50 --repeats 1 --iters-k1e4 5 --batches 16"
+else NUM=100; ITERS=500; OBJECTS=6; BIG=${BIG:-16}; CPUS=${CPUS:-14}
+  BENCH=${BENCH:---repeats 1 --batches 100,1000,4000}; fi
 mkdir -p "$OUT"; export PYTHONUNBUFFERED=1
 T0=$(date +%s); step() { echo "[t+$(( $(date +%s) - T0 ))s] $*"; }
+# lim S: S seconds, or what is left of the budget if less (at least 1)
+lim() { local left=$(( BUDGET - ($(date +%s) - T0) )); [ "$left" -lt "$1" ] && echo $(( left > 1 ? left : 1 )) || echo "$1"; }
 nvidia-smi -L 2>/dev/null || echo "no nvidia-smi"
 step "1. CUDA tests"
-timeout 300 python3 -m pytest -q -p no:cacheprovider tests/synth/test_device.py tests/objects/test_sdf.py \
+timeout "$(lim 150)" python3 -m pytest -q -p no:cacheprovider tests/synth/test_device.py tests/objects/test_sdf.py \
   tests/hands/test_kinematics.py tests/wrench/test_gws.py tests/synth/test_target.py -rs >"$OUT/pytest_cuda.log" 2>&1
 tail -3 "$OUT/pytest_cuda.log"
 step "2. datagen synth --num $NUM --iters $ITERS on $OBJ ($DEVICE)"
-for r in 1 2 3; do /usr/bin/time -f "wall_s=%e" timeout 300 python3 -m datagen.cli synth --object "$OBJ" --num $NUM \
+for r in 1 2 3; do /usr/bin/time -f "wall_s=%e" timeout "$(lim 100)" python3 -m datagen.cli synth --object "$OBJ" --num $NUM \
   --iters $ITERS --device $DEVICE --out "$OUT/synth_$r.parquet" 2>&1 | grep -E "wrote|wall_s|error"; done
 python3 -c "import pyarrow.parquet as pq; a, b = (pq.read_table('$OUT/synth_%d.parquet' % i) for i in (2, 3)); print('identical runs:', a.equals(b))"
 step "3. the default job's shards (on CUDA wherever there is a GPU), no Ray"
-rm -rf "$OUT/job"
-timeout 300 python3 -m benchmarks.cuda_shards "$OUT/job" $OBJECTS >"$OUT/shards.log" 2>&1; grep -E "^\{|^shards|^failure" "$OUT/shards.log"
+rm -rf "$OUT/job" "$OUT/job_big"
+timeout "$(lim 150)" python3 -m benchmarks.cuda_shards "$OUT/job" $OBJECTS --cpus $CPUS >"$OUT/shards.log" 2>&1
+grep -E "^\{|^shards|^failure" "$OUT/shards.log" | cut -c1-400
+step "3b. $BIG objects in one shard, $CPUS CPUs"
+timeout "$(lim 180)" python3 -m benchmarks.cuda_shards "$OUT/job_big" $BIG --per-shard $BIG --cpus $CPUS >"$OUT/shards_big.log" 2>&1
+grep -E "^\{|^shards|^failure" "$OUT/shards_big.log" | cut -c1-600
 step "4. bench-synth ($DEVICE)"
-timeout 300 python3 -m benchmarks.bench_synth --device $DEVICE $BENCH --out "$OUT/synth_$DEVICE.md" | tail -6
+timeout "$(lim 150)" python3 -m benchmarks.bench_synth --device $DEVICE $BENCH --out "$OUT/synth_$DEVICE.md" | tail -6
 step done

@@ -4,8 +4,9 @@ Part of the GPU check (`benchmarks/cuda_check.sh`): it runs `workers.shard.run_s
 as a Ray task would (processing, synthesis, MuJoCo evaluation, Parquet), one shard after the
 other, then prints each shard's summary, the per-stage totals and the failures. Ray itself is
 not needed, so the check also runs where Ray cannot be installed. Usage:
-``python -m benchmarks.cuda_shards OUT_DIR [OBJECTS] [--cpus N]`` (default 6 procedural
-objects, the `make dataset` job, one CPU per shard).
+``python -m benchmarks.cuda_shards OUT_DIR [OBJECTS] [--cpus N] [--per-shard P]`` (default 6
+procedural objects, the `make dataset` job, one CPU per shard, 2 objects per shard). A GPU wants
+larger synthesis batches: ``--per-shard 16`` puts 16 objects (32 targets) in one shard's batch.
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ def main() -> None:
     ap.add_argument("out", help="job directory (created)")
     ap.add_argument("objects", type=int, nargs="?", default=6)
     ap.add_argument("--cpus", type=float, default=1.0, help="cpus_per_shard: torch threads and evaluation processes")
+    ap.add_argument("--per-shard", type=int, default=PREFERRED_PER_SHARD, help="objects_per_shard")
     args = ap.parse_args()
-    cfg = JobConfig(count=args.objects, cpus_per_shard=args.cpus, objects_per_shard=PREFERRED_PER_SHARD)
+    cfg = JobConfig(count=args.objects, cpus_per_shard=args.cpus, objects_per_shard=args.per_shard)
     job = JobDir(args.out)
     job.init(cfg)
     entries = prepare_manifest(job, cfg)
@@ -45,7 +47,8 @@ def main() -> None:
     wall = time.perf_counter() - t0
     stages = {k: round(sum(s["timings"][k] for s in sums), 1) for k in sums[0]["timings"]}
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
-    print(f"shards: device={sums[0]['device']} ({gpu}) objects={args.objects} "
+    print(f"shards: device={sums[0]['device']} ({gpu}) objects={args.objects} per_shard={args.per_shard} "
+          f"cpus={args.cpus} "
           f"rows={sum(s['grasps'] for s in sums)} success={sum(s['success'] for s in sums)} "
           f"wall_s={wall:.1f} stages={stages}")
     for f in pq.read_table(job.failures_path).to_pylist():

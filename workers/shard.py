@@ -116,8 +116,12 @@ def _idle_cores():
     its CPUs no task holds now (asked at most once a second); None outside Ray or on a cluster of
     several nodes (an idle CPU there may be on another machine). When a job's other shards have
     finished and none waits, the evaluation steps its directions on the freed core
-    (`datagen.eval.Evaluator`, ``spare_cores``)."""
-    import ray
+    (`datagen.eval.Evaluator`, ``spare_cores``). A shard run in-process without Ray installed
+    (`benchmarks/cuda_shards.py`) has none."""
+    try:
+        import ray
+    except ImportError:
+        return None
 
     try:
         if not ray.is_initialized() or sum(bool(n.get("Alive")) for n in ray.nodes()) != 1:

@@ -153,6 +153,18 @@ def _evaluate_rows_pooled(rows: list[dict], base: str, cfg_dict: dict):
             return RuntimeError(f"{type(exc).__name__}: {exc}")
 
 
+def pool_context() -> mp.context.BaseContext:
+    """The evaluation pool's start method: the platform's (fork on Linux), but spawn once this
+    process has used CUDA. Autograd on a GPU starts device threads that a fork cannot carry, and
+    PyTorch then refuses any backward pass in the child ("Unable to handle autograd's threading in
+    combination with fork-based multiprocessing"), which failed every grasp of a GPU shard with
+    several CPUs (seen on an H200, benchmarks/results/cuda_check.md). A spawned worker starts a
+    fresh interpreter (about a second more per pool)."""
+    import torch
+
+    return mp.get_context("spawn" if torch.cuda.is_initialized() else None)
+
+
 def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1,
                    spare_cores=None) -> pa.Table:
     """``table`` with `EVAL_COLUMNS` appended (replaced if present). ``workers`` > 1 splits the
@@ -168,7 +180,7 @@ def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", 
         bounds = np.linspace(0, len(rows), n + 1).astype(int)
         # workers ignore Ctrl-C; interrupted, this process ends them (the pool's exit: terminate)
         with sigint_blocked():
-            pool = mp.Pool(n, initializer=on_sigint, initargs=("ignore",))
+            pool = pool_context().Pool(n, initializer=on_sigint, initargs=("ignore",))
         with pool:
             parts = pool.starmap(_evaluate_rows_pooled, [(rows[a:b], str(base), cfg_d)
                                                          for a, b in zip(bounds[:-1], bounds[1:])])

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from datagen.rotation import quat_to_matrix as quaternion_to_matrix
+from datagen.scatter import index_rows
 
 from .mjcf import FlatHand, actuator_matrix, build_chain
 from .spec import HandSpec, HandSpecError
@@ -237,11 +238,12 @@ class HandModel:
         # scaled by the point's coordinate. The columns are split at link size (their gradients are
         # stacked there, not at point size: 8 ms per evaluation at 800 Shadow poses). The same
         # arithmetic as the batched 3 x 3 @ 3 x 1 matmul (identical values), without one tiny GEMM
-        # per point and pose.
+        # per point and pose. On CUDA the rows are read by `index_rows`, whose gradient sums in a
+        # fixed order (index_select's would add atomically: poses that differ from run to run).
         batch, L = T.shape[:-3], T.shape[-3]
         cols = T[..., :3, :].reshape(-1, L, 3, 4).permute(3, 1, 0, 2).reshape(4, L, -1)  # (4, L, B 3)
         used = cols[:3] if direction else cols  # a direction skips the translation column
-        c = [col.index_select(0, index).view(len(index), -1, 3) for col in used.unbind(0)]  # (N, B, 3) each
+        c = [index_rows(col, index).view(len(index), -1, 3) for col in used.unbind(0)]  # (N, B, 3) each
         p = local.t()[:, :, None, None]  # (3, N, 1, 1)
         out = c[0] * p[0] + c[1] * p[1] + c[2] * p[2]  # (N, B, 3)
         if not direction:

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import torch
 
+from datagen.scatter import index_add
+
 __all__ = ["SelfPairList", "candidate_pairs", "farthest_point_seeds", "self_overlap_energy"]
 
 
@@ -82,7 +84,7 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     link = _sphere_clusters(hand.sphere_link_index.cpu(), local.cpu(), cluster_size).to(local.device)
     L = int(link.max()) + 1 if link.numel() else 1
     count = torch.bincount(link, minlength=L).clamp_min(1)
-    mean = torch.zeros(L, 3, dtype=local.dtype, device=local.device).index_add_(0, link, local) / count[:, None]
+    mean = index_add(torch.zeros(L, 3, dtype=local.dtype, device=local.device), 0, link, local) / count[:, None]
     reach = (local - mean[link]).norm(dim=-1) + hand.sphere_radii
     radius = torch.zeros(L, dtype=local.dtype, device=local.device).scatter_reduce_(0, link, reach, "amax")
     pairs = hand.self_collision_pairs
@@ -121,7 +123,7 @@ def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: 
     with torch.no_grad():
         centres = centres.detach()
         centre = torch.zeros(B, t["count"].shape[0], 3, dtype=centres.dtype, device=centres.device)
-        centre = centre.index_add_(1, t["cluster"], centres) / t["count"][:, None].to(centres.dtype)
+        centre = index_add(centre, 1, t["cluster"], centres) / t["count"][:, None].to(centres.dtype)
         if t["gather"]:  # few groups (Shadow: 199 in 88 link pairs): each group's two centres read directly
             dist = (centre.index_select(1, t["group_a"]) - centre.index_select(1, t["group_b"])).norm(dim=-1)
         else:  # many (LEAP: 20,665): whole link-pair distance matrices, 3x faster than reading the pairs
@@ -159,7 +161,7 @@ def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor,
         hit = (centres[rows, i] - centres[rows, j]).norm(dim=-1) < radii[i] + radii[j]
         rows, i, j = rows[hit], i[hit], j[hit]  # only overlapping pairs enter the autograd graph
     ov = torch.relu(radii[i] + radii[j] - (centres[rows, i] - centres[rows, j]).norm(dim=-1))
-    return out.index_add(0, rows, ov.square())
+    return index_add(out, 0, rows, ov.square())  # a fixed summation order on CUDA too
 
 
 def _merge_by_pose(a: tuple[torch.Tensor, torch.Tensor], b: tuple[torch.Tensor, torch.Tensor], B: int):

@@ -167,5 +167,14 @@ def test_evaluation_in_a_pool_gives_the_same_rows_and_finds_a_failing_target(wor
         got = evaluate_rows(broken, targets, "force_closure", cfg, workers=2, failures=fails)
         assert [_clean(t.to_pylist()) for t in got] == [_clean(t.to_pylist()) for t in one[:2]]
         assert [(f["object_id"], f["stage"]) for f in fails] == [("ball", "eval")]
+        # a process that has used CUDA spawns its workers (a fork cannot carry autograd's device
+        # threads): the spawned pool gives the same rows (CUDA's state is faked: no GPU needed)
+        import datagen.eval.table as et
+
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(torch.cuda, "is_initialized", lambda: True)
+            assert et.pool_context().get_start_method() == "spawn"
+            spawned = evaluate_rows(table, targets, "force_closure", cfg, workers=2)
+        assert [_clean(t.to_pylist()) for t in spawned] == [_clean(t.to_pylist()) for t in one]
     finally:
         torch.set_num_threads(1)

@@ -66,6 +66,17 @@ def test_energy_terms_and_gradients_match_cpu(target, poses, task_name):
         assert torch.allclose(c, g, atol=1e-3 * scale, rtol=1e-3)
 
 
+def test_energy_terms_and_gradients_repeat_on_the_gpu(target, poses):
+    """Three evaluations at the same poses give the same bits, term by term: a failure names the
+    term whose CUDA kernels sum in thread order (atomic adds: `index_add_`, `index_select`'s
+    gradient; `datagen.scatter` has the fixed-order replacements)."""
+    runs = [_terms_and_grads("cuda", target, "force_closure", poses) for _ in range(3)]
+    for k in runs[0][0]:
+        assert all(torch.equal(runs[0][0][k], r[0][k]) for r in runs[1:]), k
+    for i, name in ((1, "root gradient"), (2, "joint gradient")):
+        assert all(torch.equal(runs[0][i], r[i]) for r in runs[1:]), name
+
+
 def test_synthesis_runs_on_the_gpu_and_repeats(target):
     hand = load_hand("shadow", device="cuda")
     cfg = SynthConfig(iters=80, seed=5, seeds_per_grasp=4, seed_select_iter=40)
