@@ -31,3 +31,12 @@ def index_rows(x: torch.Tensor, index: torch.Tensor, sorted_sum: bool | None = N
     if not (x.device.type != "cpu" if sorted_sum is None else sorted_sum):
         return x.index_select(0, index)
     return x[index]
+
+
+def batch_rows(x: torch.Tensor, index: torch.Tensor, sorted_sum: bool | None = None) -> torch.Tensor:
+    """``(T, W, ...)``: rows ``index (T, W)`` of each batch ``t`` of ``x (T, P, ...)``, i.e.
+    ``x.gather(1, index)`` broadcast over the trailing dims, with a gradient summed in a fixed
+    order on CUDA too (``gather``'s is a scatter-add). ``sorted_sum`` as in `index_add`."""
+    if not (x.device.type != "cpu" if sorted_sum is None else sorted_sum):
+        return x.gather(1, index.reshape(index.shape + (1,) * (x.dim() - 2)).expand(index.shape + x.shape[2:]))
+    return x[torch.arange(x.shape[0], device=x.device)[:, None], index]

@@ -8,7 +8,7 @@ CPU and compared with the plain operations, values and gradients, on indices wit
 import pytest
 import torch
 
-from datagen.scatter import index_add, index_rows
+from datagen.scatter import batch_rows, index_add, index_rows
 
 
 @pytest.mark.parametrize("dim", [0, 1])
@@ -39,3 +39,17 @@ def test_sorted_rows_equal_index_select_and_their_gradient_counts_repeats():
     rows.sum().backward()
     # d/dx of the sum of the gathered rows: each row of x counted as often as it was read
     assert torch.equal(x.grad, torch.bincount(idx, minlength=5)[:, None].double().expand(5, 4))
+
+
+def test_sorted_batch_rows_equal_gather():
+    g = torch.Generator().manual_seed(2)
+    x = torch.randn(3, 6, 3, generator=g, dtype=torch.float64, requires_grad=True)
+    idx = torch.randint(0, 6, (3, 10), generator=g)
+    want = x.gather(1, idx[..., None].expand(3, 10, 3))
+    for sorted_sum in (False, True):
+        got = batch_rows(x, idx, sorted_sum=sorted_sum)
+        assert torch.equal(got, want)
+        (grad,) = torch.autograd.grad(got.sum(), x)
+        # each row of each batch counted as often as that batch read it
+        counts = torch.stack([torch.bincount(i, minlength=6) for i in idx]).double()
+        assert torch.equal(grad, counts[..., None].expand(3, 6, 3))

@@ -18,6 +18,7 @@ from collections import OrderedDict
 
 import torch
 
+from datagen.scatter import batch_rows
 from datagen.synth.stacked import per_target_rows, stacked_distance, stacked_grids
 
 __all__ = ["sphere_penetration"]
@@ -75,7 +76,7 @@ def _stacked_candidate_distance(targets, n: int, N: int, points: torch.Tensor, i
     width = int(counts.max())
     local = torch.zeros(T, width, dtype=torch.long, device=idx.device)
     local[t, slot] = idx - t * P
-    padded = points.reshape(T, P, 3).gather(1, local[..., None].expand(T, width, 3))  # (T, width, 3)
+    padded = batch_rows(points.reshape(T, P, 3), local)  # (T, width, 3)
     return stacked_distance(stack, padded)[t, slot]
 
 
