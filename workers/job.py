@@ -77,6 +77,8 @@ AUTO = "auto"                           # objects_per_shard chosen at the job's 
 PREFERRED_PER_SHARD = 2                 # 4 targets (2 objects x 2 scales) per synthesis: its cheapest batch
 MAX_AUTO_PER_SHARD = 4                  # at most this many objects in an automatically sized shard
 SINGLE_OBJECT_COST = 1.16               # synthesis cost per grasp of a 1-object shard (2 targets) over 2 objects'
+GPU_AUTO_PER_SHARD = 16                 # on GPUs: one batch of 32 targets, 15.0 s for 512 grasps on an H200, against
+                                        # 33.2 s for 192 grasps in 3 batches of 4 targets (cuda_check.md, 2026-11-27)
 
 
 @dataclass(frozen=True)
@@ -386,8 +388,12 @@ class JobDir:
         atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
 
 
-def shard_size(n_objects: int, workers: int) -> int:
+def shard_size(n_objects: int, workers: int, gpu: bool = False) -> int:
     """Objects per shard for ``n_objects`` on ``workers`` shard slots (``objects_per_shard: auto``).
+
+    ``gpu``: the shards synthesize on GPUs, where a batch costs about the same from 100 to 4000
+    poses (latency-bound, `benchmarks/results/synth_cuda.md`): the largest shards that still give
+    every slot one, up to ``GPU_AUTO_PER_SHARD``. Otherwise (CPUs):
 
     Ray hands the shards, in order, to the first free slot. With ``p`` objects per shard there
     are F full shards and maybe a last, shorter one of r objects; the full ones end after
@@ -400,6 +406,8 @@ def shard_size(n_objects: int, workers: int) -> int:
     job); on 16 slots: 1; 5000 objects on 2: 2."""
     if n_objects < 1 or workers < 1:
         raise JobError(f"shard_size needs n_objects >= 1 and workers >= 1, got {n_objects}, {workers}")
+    if gpu:
+        return min(GPU_AUTO_PER_SHARD, -(-n_objects // workers))
 
     def estimate(p: int) -> float:
         full, rest = divmod(n_objects, p)

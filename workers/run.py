@@ -241,12 +241,14 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         job.unlock()
 
 
-def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> tuple[int, bool]:
-    """(shard tasks that can run at once, whether this connected to a Ray cluster to count them).
+def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> tuple[int, bool, bool]:
+    """(shard tasks that can run at once, whether this connected to a Ray cluster to count them,
+    whether the shards get GPUs).
 
-    Local: ``num_cpus`` (or every core) over ``cpus_per_shard``. A cluster (``address`` or
-    $RAY_ADDRESS, not "local"): its CPUs over ``cpus_per_shard``, and its GPUs over
-    ``gpus_per_shard`` when it has GPUs (the scarcer of the two), as Ray reports them now."""
+    Local: ``num_cpus`` (or every core) over ``cpus_per_shard``, and this machine's CUDA devices
+    over ``gpus_per_shard`` when it has any. A cluster (``address`` or $RAY_ADDRESS, not "local"):
+    its CPUs over ``cpus_per_shard``, and its GPUs over ``gpus_per_shard`` when it has GPUs, as Ray
+    reports them now. The scarcer resource sets the count: a shard task asks for both."""
     import ray
 
     address = address or os.environ.get("RAY_ADDRESS") or None
@@ -256,12 +258,16 @@ def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> t
             ray.init(address=address, log_to_driver=False)
             connected = True
         res = ray.cluster_resources()
-        slots = res.get("CPU", 1.0) / cfg.cpus_per_shard
-        if res.get("GPU", 0) > 0 and cfg.gpus_per_shard > 0:
-            slots = min(slots, res["GPU"] / cfg.gpus_per_shard)
+        cpus, gpus = res.get("CPU", 1.0), res.get("GPU", 0)
     else:
-        slots = (num_cpus or os.cpu_count() or 1) / cfg.cpus_per_shard
-    return max(1, int(slots + 1e-9)), connected
+        import torch
+
+        cpus, gpus = num_cpus or os.cpu_count() or 1, torch.cuda.device_count() if torch.cuda.is_available() else 0
+    slots = cpus / cfg.cpus_per_shard
+    on_gpus = gpus > 0 and cfg.gpus_per_shard > 0
+    if on_gpus:
+        slots = min(slots, gpus / cfg.gpus_per_shard)
+    return max(1, int(slots + 1e-9)), connected, on_gpus
 
 
 def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: int | None) -> tuple[JobConfig, bool]:
@@ -277,8 +283,8 @@ def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: 
             return dataclasses.replace(cfg, objects_per_shard=stored), False
         # no number recorded (not a job of this code): resolve as for a new job; JobDir.init then
         # names whatever differs
-    slots, connected = worker_slots(cfg, address, num_cpus)
-    return dataclasses.replace(cfg, objects_per_shard=shard_size(cfg.count, slots)), connected
+    slots, connected, on_gpus = worker_slots(cfg, address, num_cpus)
+    return dataclasses.replace(cfg, objects_per_shard=shard_size(cfg.count, slots, gpu=on_gpus)), connected
 
 
 def _discard_new_job(job: JobDir, remove_dir: bool) -> None:

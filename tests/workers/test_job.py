@@ -86,12 +86,24 @@ def test_shard_size_fills_the_workers():
             assert _list_schedule_makespan(n, p, w) == pytest.approx(best), (n, w, p)
     with pytest.raises(JobError, match="workers >= 1"):
         shard_size(6, 0)
+    # on GPUs: the largest shards (one synthesis batch each, up to 16 objects) that keep every
+    # slot busy: one GPU takes 16 objects at a time, 8 GPUs share 40 objects 5 each
+    assert [shard_size(6, 1, gpu=True), shard_size(100, 1, gpu=True), shard_size(40, 8, gpu=True),
+            shard_size(3, 8, gpu=True)] == [6, 16, 5, 1]
 
 
 def test_auto_layout_is_chosen_once_and_kept_on_resume(tmp_path):
     cfg = tiny_config("procedural", count=6, objects_per_shard=AUTO)
-    assert worker_slots(cfg, None, 2) == (2, False)
-    assert worker_slots(JobConfig(**{**cfg.to_dict(), "cpus_per_shard": 2.0}), None, 8) == (4, False)
+    assert worker_slots(cfg, None, 2) == (2, False, False)
+    assert worker_slots(JobConfig(**{**cfg.to_dict(), "cpus_per_shard": 2.0}), None, 8) == (4, False, False)
+    # a local machine with GPUs (faked: no GPU needed): one shard per GPU, however many cores
+    with pytest.MonkeyPatch.context() as mp:
+        import torch
+
+        mp.setattr(torch.cuda, "is_available", lambda: True)
+        mp.setattr(torch.cuda, "device_count", lambda: 2)
+        assert worker_slots(cfg, None, 16) == (2, False, True)
+        assert worker_slots(JobConfig(**{**cfg.to_dict(), "gpus_per_shard": 0.0}), None, 16) == (16, False, False)
     job = JobDir(tmp_path / "job")
     with pytest.raises(JobError, match="'auto' must be resolved"):
         job.init(cfg)
