@@ -135,3 +135,17 @@ def test_native_scale_rows_and_a_mesh_not_in_metres(tmp_path, cache_dir):
     fails = pq.read_table(job.failures_path).to_pylist()
     assert [(f["object_id"], f["reason"]) for f in fails] == [("b_box_mm.obj", "native_size_out_of_range")]
     assert "millimetres" in fails[0]["message"]
+
+
+def test_a_shard_runs_where_ray_is_not_installed(tmp_path, mesh_source, cache_dir, monkeypatch):
+    """`benchmarks/cuda_shards.py` runs shards in-process on machines without Ray (a GPU box that
+    cannot install it): the shard's idle-core question must not import it (it did, and failed)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    with pytest.raises(ImportError):
+        import ray  # noqa: F401
+    assert shard_mod._idle_cores() is None
+    job = run_all(tmp_path / "job", tiny_config(mesh_source), cache_dir, only={0})
+    rows = pq.read_table(job.shard_path(0))
+    assert rows.num_rows > 0
