@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # (and its own package). The root `datagen/__init__.py` is the curated facade over all of them.
 RANK = {
     "errors": 0,
-    "config": 1, "_atomic": 1, "_interrupt": 1, "rotation": 1, "gl": 1,
+    "config": 1, "_atomic": 1, "_interrupt": 1, "rotation": 1, "scatter": 1, "gl": 1,
     "wrench": 2, "hands": 2, "objects": 2,
     "tasks": 3, "io": 3,
     "synth": 4, "eval": 4,
