@@ -75,6 +75,7 @@ class SynthConfig(Config):
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     task_seed_score: bool = True  #: gamma < 180, task energy on: seed choice by whole-hand task epsilon, else energy
+    pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
     seed: int = 0
 
     def for_task(self, task) -> "SynthConfig":
@@ -102,6 +103,8 @@ class SynthConfig(Config):
             raise ConfigError(f"SynthConfig.sphere_margin_m must be in [0, 0.01) m or null, got {self.sphere_margin_m}")
         if not (math.isfinite(self.self_pair_skin_m) and self.self_pair_skin_m >= 0):
             raise ConfigError(f"SynthConfig.self_pair_skin_m must be a finite number >= 0 m, got {self.self_pair_skin_m}")
+        if not (math.isfinite(self.pinch_antipodal) and self.pinch_antipodal >= 0):
+            raise ConfigError(f"SynthConfig.pinch_antipodal must be a finite number >= 0, got {self.pinch_antipodal}")
         if self.seed_halving_iter < 0:
             raise ConfigError(f"SynthConfig.seed_halving_iter must be >= 0 (0: off), got {self.seed_halving_iter}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1 or self.seeds_kept < 1:

@@ -3,7 +3,9 @@
 ``E = w_t E_task + w_d E_dist + w_p E_pen + w_s E_self + w_j E_joint``:
 
 * ``E_task``: the cosine task energy of :func:`datagen.wrench.task_energy`, averaged over the K
-  directions, on the task fingertips' nearest object points and inward normals;
+  directions, on the task fingertips' nearest object points and inward normals; for a
+  two-finger task at gamma = 180 deg plus ``cfg.pinch_antipodal`` times the pinch's antipodal
+  error (:func:`datagen.wrench.pinch_antipodal_error`, not in the paper);
 * ``E_dist``: ``sum_i d_i^2`` (m^2), ``d_i`` the signed gap between fingertip ``i``'s contact
   sphere (the distal-link collision sphere nearest the pad point) and the object: the same
   sphere the penetration term pushes out, so the two terms agree on where contact is;
@@ -30,7 +32,7 @@ from datagen.synth.penetration import sphere_penetration
 from datagen.synth.scenery import Scenery
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
 from datagen.synth.stacked import grid_query
-from datagen.wrench import task_energy
+from datagen.wrench import pinch_antipodal_error, task_energy
 from datagen.wrench.tws import task_wrench_at_contacts
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
@@ -179,6 +181,9 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
             kind=cfg.task_energy_kind, delta_deg=cfg.delta_deg, normalize=cfg.normalize,
             contact_model=cfg.contact_model, torsional_mu=cfg.torsional_mu,
         ) / directions.shape[0]
+        if cfg.pinch_antipodal > 0 and task.gamma_deg >= 180 and state.contact_points.shape[-2] == 2:
+            # a two-finger pinch: E_t cannot see how far its normals turn from its axis (wrench/antipodal.py)
+            e_task = e_task + cfg.pinch_antipodal * pinch_antipodal_error(state.contact_points, state.contact_normals)
     else:
         e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])
     if cfg.sphere_margin_m is None:
