@@ -14,12 +14,17 @@ from __future__ import annotations
 import torch
 
 
+def _sorted(x: torch.Tensor, sorted_sum: bool | None) -> bool:
+    """Whether to sum in the sorted order: ``sorted_sum``, by default on every device but the CPU."""
+    return x.device.type != "cpu" if sorted_sum is None else sorted_sum
+
+
 def index_add(out: torch.Tensor, dim: int, index: torch.Tensor, src: torch.Tensor,
               sorted_sum: bool | None = None) -> torch.Tensor:
     """``out.index_add(dim, index, src)`` (a new tensor), summed in a fixed order on CUDA too.
     ``index (n,)`` long; ``src`` has ``out``'s shape except ``n`` along ``dim``. ``sorted_sum``:
     use the sorted accumulation (default: on every device but the CPU)."""
-    if not (out.device.type != "cpu" if sorted_sum is None else sorted_sum):
+    if not _sorted(out, sorted_sum):
         return out.index_add(dim, index, src)
     return out.movedim(dim, 0).index_put((index,), src.movedim(dim, 0), accumulate=True).movedim(0, dim)
 
@@ -28,7 +33,7 @@ def index_rows(x: torch.Tensor, index: torch.Tensor, sorted_sum: bool | None = N
     """``x.index_select(0, index)``: ``(n, ...)`` rows of ``x (R, ...)``, whose gradient is summed
     in a fixed order on CUDA too (advanced indexing's backward, not ``index_add_``'s atomics).
     ``sorted_sum`` as in `index_add`."""
-    if not (x.device.type != "cpu" if sorted_sum is None else sorted_sum):
+    if not _sorted(x, sorted_sum):
         return x.index_select(0, index)
     return x[index]
 
@@ -37,6 +42,6 @@ def batch_rows(x: torch.Tensor, index: torch.Tensor, sorted_sum: bool | None = N
     """``(T, W, ...)``: rows ``index (T, W)`` of each batch ``t`` of ``x (T, P, ...)``, i.e.
     ``x.gather(1, index)`` broadcast over the trailing dims, with a gradient summed in a fixed
     order on CUDA too (``gather``'s is a scatter-add). ``sorted_sum`` as in `index_add`."""
-    if not (x.device.type != "cpu" if sorted_sum is None else sorted_sum):
+    if not _sorted(x, sorted_sum):
         return x.gather(1, index.reshape(index.shape + (1,) * (x.dim() - 2)).expand(index.shape + x.shape[2:]))
     return x[torch.arange(x.shape[0], device=x.device)[:, None], index]
