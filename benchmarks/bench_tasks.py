@@ -18,8 +18,10 @@ roll +-180 deg, tilt +-15 deg, fingers open; `datagen.tasks.InitConfig` defaults
 in which the task energy alone must bring the fingertips to where the task wrench is resisted.
 
 Besides pass/fail at the task's magnitude, each pose's largest held multiple of the task's
-disturbance (`datagen.eval.Evaluator.margin`, grid 0.25..32, same thresholds) is recorded;
-the report gives its median and quartiles per task and variant.
+disturbance (`datagen.eval.Evaluator.margin`: bisection on quarter octaves 0.25..32, octaves
+before 2026-11-27; same thresholds) is recorded; the report gives its median and quartiles per
+task and variant, and whether the full method's poses hold more than the baseline's (median, and
+a one-sided Mann-Whitney test).
 
 Each (hand, variant, task, num, iters) run is stored as a JSON record under ``--records``
 (resumable: existing records are reused unless ``--force``); the report
@@ -314,7 +316,50 @@ def _held_cell(c) -> str:
     if not c or "held_multiple" not in c:
         return "-"
     q = np.percentile(c["held_multiple"], [50, 25, 75], method="lower")
-    return f"{q[0]:g} [{q[1]:g}, {q[2]:g}]"
+    return f"{q[0]:.3g} [{q[1]:.3g}, {q[2]:.3g}]"
+
+
+def _grid_name(cells) -> str:
+    """The held-multiple grid(s) the records ran on, in words."""
+    from datagen.eval import OCTAVE_MULTIPLES  # the grid of the records that do not name theirs
+
+    names = set()
+    for c in cells:
+        if c and "held_multiple" in c:
+            g = np.log2(c.get("multiples") or OCTAVE_MULTIPLES)
+            step = np.diff(g).min() if len(g) > 1 else 1.0
+            kind = "octaves" if np.isclose(step, 1.0) else f"1/{1 / step:.0f} octaves"
+            names.add(f"{kind} {2 ** g[0]:g}..{2 ** g[-1]:g}")
+    return "; ".join(sorted(names)) or "-"
+
+
+def held_comparison(full, base) -> tuple[str, bool, float] | None:
+    """Full vs baseline held multiples of one task: (cell, median higher, one-sided p).
+
+    p: the Mann-Whitney U test's, alternative "full's held multiples are stochastically larger"
+    (ties counted by the usual mid-rank correction); None without both records."""
+    from scipy.stats import mannwhitneyu
+
+    if not (full and base and "held_multiple" in full and "held_multiple" in base):
+        return None
+    f, b = np.asarray(full["held_multiple"], float), np.asarray(base["held_multiple"], float)
+    mf, mb = (float(np.percentile(x, 50, method="lower")) for x in (f, b))
+    p = 1.0 if np.all(f == f[0]) and np.all(b == f[0]) else float(mannwhitneyu(f, b, alternative="greater").pvalue)
+    word = "higher" if mf > mb else "tie" if mf == mb else "lower"
+    return f"{word} (p {p:.2g})", mf > mb, p
+
+
+def _comparison_row(pick, label: str = "Ours vs baseline") -> tuple[str, str] | None:
+    """The held table's last row (per task: median higher / tie / lower, p) and its summary."""
+    cmp = [held_comparison(pick("full", t), pick("baseline", t)) for t in TASKS]
+    if not any(cmp):
+        return None
+    got = [x for x in cmp if x]
+    higher = sum(x[1] for x in got)
+    sig = sum(x[2] < 0.05 for x in got)
+    row = f"| {label}: median, one-sided p | " + " | ".join(x[0] if x else "-" for x in cmp) + " |"
+    return row, (f"median held higher than the baseline's on {higher} of {len(got)} tasks, the poses hold more "
+                 f"(one-sided Mann-Whitney p < 0.05) on {sig} of {len(got)}")
 
 
 def _sizes(cells) -> str:
@@ -384,15 +429,21 @@ def _render_hand(recs: list[dict], hand: str, init: str) -> list[str]:
             lines.append(f"| paper {v} | " + " | ".join(str(x) for x in PAPER[v][0]) + f" | {PAPER[v][1]} | | |")
     lines.append("")
     if any(pick(v, t) and "held_multiple" in pick(v, t) for v in VARIANTS for t in TASKS):
+        grid = _grid_name([pick(v, t) for v in VARIANTS for t in TASKS])
         lines += [f"### Held task wrench: {hand}, {what}", "",
-                  "Per pose, the largest multiple of the task's disturbance held (grid 0.25, 0.5, 1, 2, 4, 8, 16, 32; "
+                  f"Per pose, the largest multiple of the task's disturbance held (bisection on the grid: {grid}; "
                   "0: none, or rejected before simulating); cells: median [p25, p75] over the poses (N in the table "
-                  "above). Median held magnitude = median x the disturbance in the task table.", "",
+                  "above). Median held magnitude = median x the disturbance in the task table. Last row: the full "
+                  "method's median against the baseline's, and the one-sided Mann-Whitney p of \"the full method's "
+                  "poses hold more\".", "",
                   "| variant | " + " | ".join(COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
         for v in TABLE_VARIANTS:
             cells = [pick(v, t) for t in TASKS]
             if any(c and "held_multiple" in c for c in cells):
                 lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_held_cell(c) for c in cells) + " |")
+        cmp = _comparison_row(pick)
+        if cmp:
+            lines += [cmp[0], "", f"Held task wrench, {hand}, {what}: {cmp[1]}."]
         lines.append("")
     lines += _energy_vs_test(pick, hand, what)
     if any(pick(v, t) and "success_stress" in pick(v, t) for v in VARIANTS for t in TASKS):
@@ -457,7 +508,9 @@ def headline(records: Path, hand: str = "shadow", pair=("full", "baseline"), lab
         if all(all(c) for c in cells.values()):
             f, b = (100 * np.mean([c["success"] for c in cells[v]]) for v in pair)
             n = "/".join(sorted({str(c["num"]) for v in cells for c in cells[v]}))
-            return f"{label}: full={f:.1f} baseline={b:.1f} (ten tasks, {hand}, N={n} poses per task, code {version})"
+            cmp = _comparison_row(lambda v, t: _pick(recs, hand, {"full": pair[0], "baseline": pair[1]}[v], t, "generic"))
+            held = f"; {cmp[1]}" if cmp else ""
+            return f"{label}: full={f:.1f} baseline={b:.1f} (ten tasks, {hand}, N={n} poses per task, code {version}{held})"
     return f"{label}: full=- baseline=- (no complete generic-initialisation run of {hand} yet)"
 
 

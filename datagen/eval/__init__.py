@@ -20,11 +20,12 @@ import importlib
 
 __all__ = [
     "DEFAULT_TASKS", "DIRECTION_NAMES", "EvalConfig", "EvalError", "Evaluator", "GraspResult",
-    "MULTIPLES", "ObjectPieces", "Reason", "Scene", "TaskMargin", "TaskTest", "build_scene", "pieces_from_processed",
+    "MULTIPLES", "OCTAVE_MULTIPLES", "ObjectPieces", "Reason", "Scene", "TaskMargin", "TaskTest", "build_scene",
+    "pieces_from_processed",
 ]
 _MODULE = {"DEFAULT_TASKS": "config", "DIRECTION_NAMES": "config", "EvalConfig": "config", "EvalError": "config",
            "TaskTest": "config", "Evaluator": "evaluate", "GraspResult": "evaluate", "Reason": "evaluate",
-           "MULTIPLES": "evaluate", "TaskMargin": "evaluate",
+           "MULTIPLES": "evaluate", "OCTAVE_MULTIPLES": "evaluate", "TaskMargin": "evaluate",
            "ObjectPieces": "scene", "Scene": "scene", "build_scene": "scene", "pieces_from_processed": "scene"}
 
 

@@ -19,8 +19,8 @@ self penetration, per-finger contact distance, and the epsilon metric
 (`datagen.wrench.epsilon_metric`, contacts within ``contact_distance_m``, mu = friction).
 
 `Evaluator.margin` also measures how large a disturbance the grasp holds: the same test (same
-thresholds, same closed hand) repeated at multiples of its disturbance on a fixed grid
-(`MULTIPLES`), see `TaskMargin`.
+thresholds, same closed hand) repeated at multiples of its disturbance, bisecting a fixed grid
+(`MULTIPLES`, quarter octaves), see `TaskMargin`.
 """
 
 from __future__ import annotations
@@ -47,10 +47,14 @@ from .scene import ObjectPieces, Scene, build_scene
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MULTIPLES", "Reason", "GraspResult", "Evaluator", "TaskMargin"]
+__all__ = ["MULTIPLES", "OCTAVE_MULTIPLES", "Reason", "GraspResult", "Evaluator", "TaskMargin"]
 
-#: the fixed grid of disturbance multiples `Evaluator.margin` tests (1: the test's own magnitude)
-MULTIPLES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+#: the fixed grid of disturbance multiples `Evaluator.margin` bisects (1: the test's own
+#: magnitude): quarter octaves 2^(k/4) from 0.25 to 32, each 19% above the one before. Octaves
+#: (`OCTAVE_MULTIPLES`, the grid until 2026-11-27) tied most poses of a task at one value
+#: (benchmarks/results/tasks.md, Notes, session 23).
+MULTIPLES = tuple(2.0 ** (k / 4) for k in range(-8, 21))
+OCTAVE_MULTIPLES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 
 
 class Reason(str, enum.Enum):
@@ -103,13 +107,14 @@ class TaskMargin:
     """The largest multiple of a test's disturbance that a grasp holds (`Evaluator.margin`).
 
     ``result``: the verdict at the test's own magnitude (identical to `Evaluator.evaluate`).
-    ``held_multiple``: on the grid, scanning up from 1 while the grasp holds, the last multiple
-    held; if it fails at 1, scanning down, the first multiple held; 0 when it holds none (or was
-    rejected before simulating: penetration, no contact, filters, invalid). Assumes that holding
-    a disturbance implies holding a smaller one of the same direction (checked only where the
-    scan passes). ``held_wrench``: ``held_multiple`` times the test's disturbance magnitude
-    (N for a force, N m for a pure torque; the six-direction test's force, N). ``tested``:
-    ``(multiple, held)`` pairs in the order simulated."""
+    ``held_multiple``: the largest multiple of the grid held, found by bisection: above 1 if the
+    grasp holds at 1, below it otherwise; 0 when it holds none (or was rejected before
+    simulating: penetration, no contact, filters, invalid). Assumes that holding a disturbance
+    implies holding a smaller one of the same direction (only the bisection's own tests check
+    it), so the grid's neighbour above ``held_multiple`` was tested and failed unless
+    ``held_multiple`` ends the grid. ``held_wrench``: ``held_multiple`` times the test's
+    disturbance magnitude (N for a force, N m for a pure torque; the six-direction test's force,
+    N). ``tested``: ``(multiple, held)`` pairs in the order simulated (1 first)."""
 
     result: GraspResult
     held_multiple: float
@@ -331,20 +336,14 @@ class Evaluator:
             out = hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, pool)
             return all(d.success for d in out)
 
-        tested, held = [(1.0, res.success)], 0.0
-        if res.success:
-            held = 1.0
-            for k in (m for m in grid if m > 1):
-                ok = holds(k)
-                tested.append((k, ok))
-                if not ok:
-                    break
-                held = k
-        else:
-            for k in (m for m in reversed(grid) if m < 1):
-                ok = holds(k)
-                tested.append((k, ok))
-                if ok:
-                    held = k
-                    break
-        return done(res, held, tuple(tested))
+        # bisection: grid[lo] held (lo -1: nothing known held), grid[hi] failed (hi len(grid):
+        # nothing known to fail), until they are neighbours
+        one = grid.index(1.0)
+        lo, hi = (one, len(grid)) if res.success else (-1, one)
+        tested = [(1.0, res.success)]
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            ok = holds(grid[mid])
+            tested.append((grid[mid], ok))
+            lo, hi = (mid, hi) if ok else (lo, mid)
+        return done(res, grid[lo] if lo >= 0 else 0.0, tuple(tested))

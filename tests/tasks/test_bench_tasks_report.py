@@ -27,3 +27,26 @@ def test_rewrite_without_generic_records_keeps_the_headline(tmp_path):
                    "tasks-generic: full=68.3 baseline=46.8 (ten tasks, shadow, N=100 poses per task, code abc)\n")
     write_report(out, "# Title\n", "tasks-generic: full=- baseline=- (no complete generic-initialisation run of shadow yet)")
     assert out.read_text().rstrip("\n").splitlines()[-1].startswith("tasks-generic: full=68.3 baseline=46.8")
+
+
+def test_held_comparison_against_an_enumerated_permutation_test():
+    """One-sided p of "full holds more": the share of the 70 ways to split the 8 poses 4 / 4
+    whose full-side rank sum is at least the observed one (no ties: the exact Mann-Whitney)."""
+    import itertools
+
+    import pytest
+
+    from benchmarks.bench_tasks import held_comparison
+
+    full, base = [2.0, 5.66, 8.0, 32.0], [0.25, 1.0, 4.0, 4.76]
+    values = full + base
+    ranks = {v: r for r, v in enumerate(sorted(values), 1)}
+    observed = sum(ranks[v] for v in full)
+    splits = list(itertools.combinations(values, 4))
+    p_ref = sum(sum(ranks[v] for v in s) >= observed for s in splits) / len(splits)
+    cell, higher, p = held_comparison({"held_multiple": full}, {"held_multiple": base})
+    assert higher and cell.startswith("higher") and p == pytest.approx(p_ref)
+    assert held_comparison({"held_multiple": base}, {"held_multiple": full})[1] is False
+    tie = held_comparison({"held_multiple": [4.0] * 5}, {"held_multiple": [4.0] * 5})
+    assert tie == ("tie (p 1)", False, 1.0)
+    assert held_comparison({"held_multiple": full}, None) is None
