@@ -349,9 +349,14 @@ def held_comparison(full, base) -> tuple[str, bool, float] | None:
     return f"{word} (p {p:.2g})", mf > mb, p
 
 
-def _comparison_row(pick, label: str = "Ours vs baseline") -> tuple[str, str] | None:
-    """The held table's last row (per task: median higher / tie / lower, p) and its summary."""
-    cmp = [held_comparison(pick("full", t), pick("baseline", t)) for t in TASKS]
+#: the variant pairs the held table compares, (full, baseline, row label)
+COMPARED = (("full", "baseline", "Ours vs baseline"), ("full_s32", "baseline_s32", "Ours vs baseline, 32 seeds"))
+
+
+def _comparison_row(pick, pair=COMPARED[0]) -> tuple[str, str] | None:
+    """A held-table row comparing ``pair`` (per task: median higher / tie / lower, p) and its summary."""
+    full, base, label = pair
+    cmp = [held_comparison(pick(full, t), pick(base, t)) for t in TASKS]
     if not any(cmp):
         return None
     got = [x for x in cmp if x]
@@ -433,17 +438,19 @@ def _render_hand(recs: list[dict], hand: str, init: str) -> list[str]:
         lines += [f"### Held task wrench: {hand}, {what}", "",
                   f"Per pose, the largest multiple of the task's disturbance held (bisection on the grid: {grid}; "
                   "0: none, or rejected before simulating); cells: median [p25, p75] over the poses (N in the table "
-                  "above). Median held magnitude = median x the disturbance in the task table. Last row: the full "
-                  "method's median against the baseline's, and the one-sided Mann-Whitney p of \"the full method's "
-                  "poses hold more\".", "",
+                  "above). Median held magnitude = median x the disturbance in the task table. Rows \"Ours vs "
+                  "baseline\": the full method's median against the baseline's (same seeds per pose), and the "
+                  "one-sided Mann-Whitney p of \"the full method's poses hold more\".", "",
                   "| variant | " + " | ".join(COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
         for v in TABLE_VARIANTS:
             cells = [pick(v, t) for t in TASKS]
             if any(c and "held_multiple" in c for c in cells):
                 lines.append(f"| {VARIANTS[v][0]} | " + " | ".join(_held_cell(c) for c in cells) + " |")
-        cmp = _comparison_row(pick)
-        if cmp:
-            lines += [cmp[0], "", f"Held task wrench, {hand}, {what}: {cmp[1]}."]
+        rows = [(pair, r) for pair in COMPARED if (r := _comparison_row(pick, pair))]
+        lines += [row for _, (row, _) in rows]
+        if rows:
+            lines += [""] + [f"Held task wrench, {hand}, {what}, {pair[2].lower()}: {summary}."
+                             for pair, (_, summary) in rows]
         lines.append("")
     lines += _energy_vs_test(pick, hand, what)
     if any(pick(v, t) and "success_stress" in pick(v, t) for v in VARIANTS for t in TASKS):
@@ -508,7 +515,7 @@ def headline(records: Path, hand: str = "shadow", pair=("full", "baseline"), lab
         if all(all(c) for c in cells.values()):
             f, b = (100 * np.mean([c["success"] for c in cells[v]]) for v in pair)
             n = "/".join(sorted({str(c["num"]) for v in cells for c in cells[v]}))
-            cmp = _comparison_row(lambda v, t: _pick(recs, hand, {"full": pair[0], "baseline": pair[1]}[v], t, "generic"))
+            cmp = _comparison_row(lambda v, t: _pick(recs, hand, v, t, "generic"), (*pair, label))
             held = f"; {cmp[1]}" if cmp else ""
             return f"{label}: full={f:.1f} baseline={b:.1f} (ten tasks, {hand}, N={n} poses per task, code {version}{held})"
     return f"{label}: full=- baseline=- (no complete generic-initialisation run of {hand} yet)"
