@@ -65,7 +65,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args()
     cfg = JobConfig(count=args.objects)
-    pcfg = cfg.build_configs()[0]
+    pcfg = cfg.recipes()[0].process
     entries = build_manifest(cfg.source, cfg.count, cfg.scales)
     modes = {"reused worker (default)": isolated_worker.MAX_TASKS, "fresh interpreter per object": 1}
     walls = {m: [] for m in modes}

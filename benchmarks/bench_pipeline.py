@@ -50,17 +50,23 @@ from workers.job import JobConfig, JobDir
 from workers.run import run_job
 
 
+
+def _synth_line(cfg: "JobConfig") -> str:
+    """The job's synthesis as a reader compares it: iterations and starts per grasp of its recipe."""
+    r = cfg.recipes()[0].synth
+    return f"{r.iters} iterations, {r.seeds_per_grasp} starts per grasp ({cfg.preset} preset)"
+
 def _warm_cache(cfg: JobConfig, cache: str) -> None:
     from datagen.objects.manifest import build_manifest
     from datagen.objects.process import process_object
 
     from datagen.synth.target import GraspTarget
 
-    pcfg = cfg.build_configs()[0]
+    pcfg = cfg.recipes()[0].process
     for e in build_manifest(cfg.source, cfg.count, cfg.scales):
         p = process_object(e.ref(), pcfg, root=cache, expected_sha256=e.sha256)
         if p.ok:  # the SDF grid cache (datagen.objects.grid_cache), as the shards' target stage reads it
-            GraspTarget.from_processed(p, e.scales[0], grid_resolution=cfg.grid_resolution, cache=cache)
+            GraspTarget.from_processed(p, e.scales[0], grid_resolution=cfg.recipes()[0].grid_resolution, cache=cache)
 
 
 COLD = dict(grasps_per_object=1, scales=(0.08,), grid_resolution=16, synth={"iters": 10, "seeds_per_grasp": 1})
@@ -81,7 +87,7 @@ def _cold_lines(cfg: JobConfig, wall: float, s: dict) -> list[str]:
     split = ", ".join(f"{k} {v:.0f} s" for k, v in stages.items())
     return ["", "## At the user's scale: a minimal config from an empty cache", "",
             f"{cfg.count} procedural objects, {cfg.grasps_per_object} grasp per object at {cfg.scales[0]} m, "
-            f"synthesis {cfg.synth}, grid {cfg.grid_resolution}^3, 2 workers, objects cache empty at the start "
+            f"synthesis {_synth_line(cfg)}, grid {cfg.recipes()[0].grid_resolution}^3, 2 workers, objects cache empty at the start "
             f"(CoACD, the SDF grids and the targets are built): {wall:.1f} s wall, {wall / cfg.count:.2f} s per "
             f"object -> `datagen run --objects 5000` with this config extrapolates to "
             f"{5000 * wall / cfg.count / 3600:.1f} h on 2 cores. Worker seconds by stage: {split}; shard CPU "
@@ -199,7 +205,7 @@ def _default_job(runs: int, cache: str | None, tmp: Path) -> list[str]:
     cfg = modes["auto"]
     lines = ["", "## The default job (`make dataset`), 2 workers", "",
              f"The default JobConfig: {cfg.count} procedural objects at {list(cfg.scales)} m, {cfg.grasps_per_object} "
-             f"grasps per object and scale, synthesis {cfg.synth}, objects cache warm; {runs} alternating runs per "
+             f"grasps per object and scale, synthesis {_synth_line(cfg)}, objects cache warm; {runs} alternating runs per "
              "layout, median wall (Ray start-up included). Core-hour = wall x 2.", "",
              "| objects per shard | shards | wall (s), median | runs (s) | grasps | validated | validated / core-hour |",
              "|---|---|---|---|---|---|---|"]
@@ -294,8 +300,8 @@ def main(argv=None) -> int:
              "(the machine is shared: other jobs inflate the times).", "",
              f"Job: {cfg.count} procedural objects at scales {list(cfg.scales)} m, {cfg.grasps_per_object} Shadow "
              "grasps per object and scale, "
-             f"task force_closure, one object per shard, synthesis {cfg.synth}, default evaluation (six "
-             f"directions, 2 s hold), SDF grid {cfg.grid_resolution}^3, objects cache warm. Wall time includes "
+             f"task force_closure, one object per shard, synthesis {_synth_line(cfg)}, default evaluation (six "
+             f"directions, 2 s hold), SDF grid {cfg.recipes()[0].grid_resolution}^3, objects cache warm. Wall time includes "
              "starting Ray.", "",
              "Core-hour = wall time x worker CPUs (the issue's measure); CPU-hour = CPU time the shard tasks "
              "actually got (less sensitive to other load on a shared machine).", "",

@@ -51,7 +51,7 @@ def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict) -> Non
     if synth:
         cfg = out.with_suffix(".yaml")
         cfg.parent.mkdir(parents=True, exist_ok=True)
-        cfg.write_text(json.dumps({"synth": {**JobConfig().synth, **synth}}))
+        cfg.write_text(json.dumps({"synth": synth}))  # over the default recipe (datagen.pipeline.resolve)
         cmd += ["--config", str(cfg)]
     subprocess.run(cmd, check=True, cwd=ROOT)
 

@@ -120,10 +120,12 @@ def _run(hand, target, task, cfg, B: int, sync) -> tuple[float, object]:
 def per_hand_table(hands: list[str], target, task, dev: str, sync, repeats: int) -> list[str]:
     """Markdown lines: seconds per grasp of the job's default synthesis for each hand, with the
     self-collision pair lists reused (default) and rebuilt every iteration, alternating runs."""
-    from workers.job import FORCE_CLOSURE_SEEDS
+    from datagen.pipeline import resolve
 
-    B, iters = 8, 300
-    lines = [f"## Per-hand cost, job defaults ({FORCE_CLOSURE_SEEDS} seeds, {iters} iterations, {B} grasps, "
+    B = 8
+    job = resolve(hands[0], task.name).synth  # the job's default recipe (dataset preset)
+    seeds, iters = job.seeds_per_grasp, job.iters
+    lines = [f"## Per-hand cost, job defaults ({seeds} seeds, {iters} iterations, {B} grasps, "
              f"K = 1e2; median of {repeats} runs, settings alternating)", "",
              "| hand | spheres | self-collision pairs | s per grasp | s per grasp, pair lists rebuilt every iteration | "
              "x Shadow | poses whose pair list was rebuilt, per evaluated pose |", "|---|---|---|---|---|---|---|"]
@@ -134,7 +136,7 @@ def per_hand_table(hands: list[str], target, task, dev: str, sync, repeats: int)
         except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
             lines.append(f"| {name} | not available: {exc} | | | | | |")
             continue
-        base = SynthConfig(iters=iters, seeds_per_grasp=FORCE_CLOSURE_SEEDS, seed=0)
+        base = dataclasses.replace(job, seed=0)
         _run(hand, target, task, dataclasses.replace(base, iters=3), B, sync)  # warm-up
         times = {0.0: [], base.self_pair_skin_m: []}
         for r in range(repeats):

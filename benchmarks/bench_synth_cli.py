@@ -11,7 +11,7 @@ grasps per second of synthesis, and per second of synthesis plus evaluation.
     python -m benchmarks.bench_synth_cli [--seeds 16,8,4] [--runs 2] [--objects mug,duck,bunny]
 
 The meshes are pybullet_data's (``make real-objects``). 16 seeds is the default
-(``datagen.synth.config.FORCE_CLOSURE_SEEDS``): what each setting buys in success rate is the
+(the ``dataset`` preset, `datagen.pipeline.PRESETS`): what each setting buys in success rate is the
 trade-off against the issue's 15 s.
 """
 

@@ -63,23 +63,22 @@ PAPER_HYPER = {"full": (72.6, 14.9, 1.5), "d15_k1e4": (75.1, 83.5, 15.3), "d0_k1
 VARIANTS = {  # name -> (label, SynthConfig overrides)
     "baseline": ("Baseline (E_t weight 0)", {"weights": {"task": 0.0}}),
     "l2": ("Ablation1: L2 task energy", {"task_energy_kind": "l2"}),
-    "nocpn": ("Ablation2: no CPN", {"normalize": False}),
+    "nocpn": ("Ablation2: no CPN", {"contact": {"normalize": False}}),
     "full": ("Ours (cos, CPN, delta 15, K 1e2)", {}),
-    "d0_k1e2": ("Ablation4: delta 0, K 1e2", {"delta_deg": 0.0}),
+    "d0_k1e2": ("Ablation4: delta 0, K 1e2", {"contact": {"delta_deg": 0.0}}),
     "d15_k1e4": ("Ablation3: delta 15, K 1e4", {"num_directions": 10_000}),
-    "d0_k1e4": ("Ablation5: delta 0, K 1e4", {"delta_deg": 0.0, "num_directions": 10_000}),
+    "d0_k1e4": ("Ablation5: delta 0, K 1e4", {"contact": {"delta_deg": 0.0}, "num_directions": 10_000}),
     # multi-start as force-closure synthesis runs it (8 seeds per pose, the best after 120
     # iterations kept): by the lowest total energy for gamma < 180 deg, where E_t is most of it
     # once the fingertips touch; by whole-hand epsilon for gamma = 180 (datagen.synth.select)
     "baseline_ms": ("Baseline, 8 seeds", {"weights": {"task": 0.0}, "seeds_per_grasp": 8}),
     "full_ms": ("Ours, 8 seeds", {"seeds_per_grasp": 8}),
-    "full_esel": ("Ours, seeds chosen by energy", {"task_seed_score": False}),
     # twice the task specs' 16 seeds per pose: what more starts buy where few of them reach the
     # task's contact region (generic initialisation: the drawer's bar, the handbag's strap)
     "baseline_s32": ("Baseline, 32 seeds", {"weights": {"task": 0.0}, "seeds_per_grasp": 32}),
     "full_s32": ("Ours, 32 seeds", {"seeds_per_grasp": 32}),
 }
-TABLE_VARIANTS = ("baseline", "baseline_ms", "baseline_s32", "l2", "nocpn", "full", "full_esel", "full_ms", "full_s32")
+TABLE_VARIANTS = ("baseline", "baseline_ms", "baseline_s32", "l2", "nocpn", "full", "full_ms", "full_s32")
 
 
 def _rss_mb() -> float:
@@ -107,17 +106,15 @@ class PeakRSS:
         self.peak_mb = self.peak - self.base
 
 
-def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool, task=None):
-    """The variant's `SynthConfig`: the task's ``synth`` block, the variant's overrides on top."""
-    from datagen.synth import SynthConfig
+def synth_config(variant: str, iters: int, hand_name: str, seed: int, no_self_pen: bool, task_name: str):
+    """The variant's `SynthConfig`: the ``paper`` preset's recipe of the task (its ``synth`` block
+    over the library defaults), the variant's overrides on top (`datagen.pipeline.resolve`)."""
+    from datagen.pipeline import resolve
 
     d = dict(VARIANTS[variant][1], iters=iters, seed=seed)
-    w = dict(d.pop("weights", {}))
     if no_self_pen:
-        w["self_penetration"] = 0.0
-    if w:
-        d["weights"] = w
-    return SynthConfig.from_dict(task.synth_settings(d) if task is not None else d)
+        d["weights"] = {**d.get("weights", {}), "self_penetration": 0.0}
+    return resolve(hand_name, task_name, preset="paper", flags={"synth": d}).synth
 
 
 class Objects:
@@ -188,7 +185,7 @@ def run_record(hand, task_name: str, variant: str, num: int, iters: int, objects
 
     task = task_for(task_name, init)
     target, pieces = objects.get(task_object(task))
-    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen, task)
+    cfg = synth_config(variant, iters, hand.name, seed, no_self_pen, task_name)
     with PeakRSS() as mem:
         t0 = time.perf_counter()
         res = synthesize(hand, [target], task, cfg, num)
@@ -299,16 +296,30 @@ def render(records: Path, machine: str) -> str:
              "task-specific (each YAML's `init`) and generic (force closure's: palm towards the inflated convex hull, "
              "the same for every task and variant); a task YAML's `synth` block (e.g. exact contacts, 8 seeds) applies "
              "to every variant, which only override their own settings. Held task wrench: per pose, the largest "
-             "multiple of the disturbance held (`Evaluator.margin`). Results are grouped by "
-             "the code version they ran at; the task table above is the current checkout's (`git log "
-             "-- datagen/tasks/specs datagen/synth/tasks` shows what changed between versions; before the house "
-             "refactor the YAMLs lived in datagen/synth/tasks).", ""]
+             "multiple of the disturbance held (`Evaluator.margin`). Per hand and initialisation the page shows the "
+             "latest code version whose records cover every task, newest first; earlier results are in git "
+             "(`git log -p benchmarks/results/tasks.md`). Command: `make bench-tasks` (`python -m benchmarks.bench_tasks`).", ""]
     lines += task_definitions() + [""]
-    for version in versions:
-        recs = [r for r in allrecs if r.get("code_version", "-") == version]
+    latest = latest_complete(allrecs, versions)
+    for version in sorted(set(latest.values()), key=versions.index, reverse=True):
+        recs = [r for r in allrecs if r.get("code_version", "-") == version
+                and latest.get((r["hand"], r.get("init", "task"))) == version]
         lines += [f"{RESULTS_HEADING}{version}", ""]
         lines += _render_version(recs)
     return "\n".join(lines)
+
+
+def latest_complete(recs: list[dict], versions: list[str]) -> dict[tuple[str, str], str]:
+    """(hand, init) -> the newest code version (``versions`` oldest first) with a record of the
+    full method on every task, else the newest with any record."""
+    out = {}
+    for key in {(r["hand"], r.get("init", "task")) for r in recs}:
+        mine = [r for r in recs if (r["hand"], r.get("init", "task")) == key]
+        have = [v for v in versions if any(r.get("code_version", "-") == v for r in mine)]
+        full = [v for v in have if {r["task"] for r in mine if r.get("code_version", "-") == v
+                                    and r["variant"] == "full"} >= set(TASKS)]
+        out[key] = (full or have)[-1]
+    return out
 
 
 def _held_cell(c) -> str:
@@ -481,24 +492,11 @@ def _render_hand(recs: list[dict], hand: str, init: str) -> list[str]:
             cfg = dict(VARIANTS[v][1])
             sizes = sorted({f"{c['num']}x{c['iters']}" for c in cells})
             paper = PAPER_HYPER[v]
-            lines.append(f"| {VARIANTS[v][0]} | {cfg.get('delta_deg', 15.0):g} | {cfg.get('num_directions', 100):.0e} | "
+            lines.append(f"| {VARIANTS[v][0]} | {cfg.get('contact', {}).get('delta_deg', 15.0):g} | {cfg.get('num_directions', 100):.0e} | "
                          f"{', '.join(sizes)} | {100 * np.mean([c['success'] for c in cells]):.1f} ({len(cells)}) | "
                          f"{np.median([c['synth_s'] for c in cells]):.1f} | {max(c['peak_mb'] for c in cells):.0f} | "
                          f"{paper[0]} / {paper[1]} s / {paper[2]} GB |")
         lines.append("")
-    lines += [f"## Runs and failure reasons: {hand}, {what}", "",
-              "| task | variant | poses x iters | success % | synthesis s | eval s | peak MB | tips in contact % | "
-              "median max penetration mm | median E_t | code | reasons |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for t in TASKS:
-        for v in VARIANTS:
-            c = pick(v, t)
-            if c:
-                why = ", ".join(f"{k} {n}" for k, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]))
-                note = " (no self-pen.)" if c.get("no_self_penetration") else ""
-                et = f"{np.median(c['e_task']):.2f}" if c.get("e_task") else "-"
-                lines.append(f"| {t} | {v}{note} | {c['num']}x{c['iters']} | {_pct(c['success'])} | {c['synth_s']:.1f} | "
-                             f"{c['eval_s']:.1f} | {c['peak_mb']:.0f} | {_pct(c['tips_in_contact'])} | "
-                             f"{c['max_penetration_mm_median']:.1f} | {et} | {c.get('code_version', '-')} | {why} |")
     lines.append("")
     return lines
 
@@ -531,16 +529,6 @@ NOTES_HEADING = "## Notes (hand-written"
 RESULTS_HEADING = "# Results at code version "
 
 
-def _sections_without_records(old: str, text: str) -> str:
-    """The ``RESULTS_HEADING`` sections of the report ``old`` whose code version has no section in
-    the freshly rendered ``text`` (their records are gone, e.g. in a fresh checkout, whose
-    records directory is empty), in their order: rewriting the report never drops a result."""
-    rendered = {line[len(RESULTS_HEADING):].strip() for line in text.splitlines() if line.startswith(RESULTS_HEADING)}
-    parts = old.split("\n" + RESULTS_HEADING)[1:]
-    return "".join(RESULTS_HEADING + part.rstrip("\n") + "\n\n" for part in parts
-                   if part.split("\n", 1)[0].strip() not in rendered)
-
-
 def write_report(out: Path, text: str, last_line: str) -> None:
     """Write the generated report to ``out``, keeping the hand-written notes section (from
     ``NOTES_HEADING`` up to a final ``tasks-generic:`` line) of the file already there, and end
@@ -548,11 +536,6 @@ def write_report(out: Path, text: str, last_line: str) -> None:
     old = out.read_text() if out.exists() else ""
     at = old.find(NOTES_HEADING)
     notes = old[at:].rstrip("\n") if at >= 0 else ""
-    kept = _sections_without_records(old[:at] if at >= 0 else old, text)
-    if kept:  # after the header, before the versions rendered from records
-        first = text.find(RESULTS_HEADING)
-        first = len(text) if first < 0 else first
-        text = text[:first] + kept + text[first:]
     if notes.splitlines() and notes.splitlines()[-1].startswith("tasks-generic:"):
         if last_line.startswith("tasks-generic: full=- "):  # no generic records here: the old line stands
             last_line = notes.splitlines()[-1]

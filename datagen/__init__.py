@@ -5,13 +5,12 @@ The names below are the curated API; each is imported from its package on first 
 ``import datagen`` stays light and has no side effects beyond a `logging.NullHandler`::
 
     import datagen
+    rows = datagen.synthesize("shadow", "mug.obj", "force_closure", n=16)   # evaluated rows, the CLI's grasps
+    recipe = datagen.resolve("shadow", "precision_key", flags={"synth": {"iters": 200}})  # one resolved config
     hand = datagen.load_hand("shadow")
-    obj = datagen.process_object(ref)                       # ref: datagen.objects.iter_source(...)
-    target = datagen.GraspTarget.from_processed(obj, scale=0.08)
-    result = datagen.synthesize(hand, [target], datagen.load_task("force_closure"), datagen.SynthConfig(), 16)
-    with datagen.Evaluator(hand, datagen.EvalConfig()) as ev: ...
-    rows = datagen.run_batch([datagen.BatchObject(obj, (0.08,))], hand, ["force_closure"],
-                             datagen.SynthConfig(), datagen.EvalConfig(), grasps_per_object=16, seed=0).rows
+    obj = datagen.process_object(ref, recipe.process)      # ref: datagen.objects.iter_source(...)
+    rows = datagen.run_batch([datagen.BatchObject(obj, (0.08,))], hand, [recipe], grasps_per_object=16).rows
+    with datagen.Evaluator(hand, recipe.eval) as ev: ...
     loader = torch.utils.data.DataLoader(datagen.GraspDataset("jobs/default"), batch_size=256)
 """
 
@@ -29,10 +28,11 @@ _API = {
     "load_hand": "datagen.hands",
     "ObjectRef": "datagen.objects", "iter_source": "datagen.objects", "process_object": "datagen.objects",
     "TaskSpec": "datagen.tasks", "load_task": "datagen.tasks", "builtin_tasks": "datagen.tasks",
-    "GraspTarget": "datagen.synth", "SynthConfig": "datagen.synth", "synthesize": "datagen.synth",
+    "GraspTarget": "datagen.synth", "SynthConfig": "datagen.synth",
     "EvalConfig": "datagen.eval", "Evaluator": "datagen.eval", "pieces_from_processed": "datagen.eval",
     "GraspDataset": "datagen.io", "read_job": "datagen.io",
-    "BatchObject": "datagen.pipeline", "run_batch": "datagen.pipeline",
+    "BatchObject": "datagen.pipeline", "run_batch": "datagen.pipeline", "synthesize": "datagen.pipeline",
+    "Recipe": "datagen.pipeline", "resolve": "datagen.pipeline",
 }
 
 __all__ = ["__version__", *_API]

@@ -25,7 +25,7 @@ REGISTRARS: dict[str, str] = {
     "hands": "datagen.listing:register_hands",
     "tasks": "datagen.listing:register_tasks",
     "manifest": "datagen.objects.commands:register_manifest",
-    "prepare": "datagen.objects.commands:register_prepare",
+    "prepare": "datagen.pipeline.commands:register_prepare",
     "synth": "datagen.pipeline.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",

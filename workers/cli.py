@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from datagen.pipeline.commands import add_recipe_arguments, recipe_flags
+
 __all__ = ["register_run", "register_status", "register_report"]
 
 
@@ -29,6 +31,7 @@ def register_run(sub: argparse._SubParsersAction) -> None:
                    help="objects per shard task, or auto (the default): chosen for the object count and the "
                         "worker slots when the job is created, e.g. 3 for the default 6 objects on 2 cores")
     p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
+    add_recipe_arguments(p)
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
     p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
@@ -79,6 +82,13 @@ def _config(args):
             data[key] = val
     if args.tasks:
         data["tasks"] = [t.strip() for t in args.tasks.split(",") if t.strip()]
+    flags = recipe_flags(args)
+    if "preset" in flags:
+        data["preset"] = flags["preset"]
+    if "synth" in flags:
+        if data.get("synth") is not None and not isinstance(data["synth"], dict):
+            raise JobError(f"{args.config}: synth must be a mapping of SynthConfig fields")
+        data["synth"] = {**(data.get("synth") or {}), **flags["synth"]}
     return JobConfig.from_dict(data, where=args.config or "command line")
 
 

@@ -40,11 +40,11 @@ from datagen._atomic import atomic_write_text
 from datagen.objects.manifest import NATIVE
 from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
-from datagen.synth.config import FORCE_CLOSURE_SEEDS
+from datagen.pipeline.recipe import DEFAULT_PRESET, resolve
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
                                SHARD_NAME, SHARDS_DIR)
 
-__all__ = ["AUTO", "EXECUTION_FIELDS", "FAST_PROCESS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
+__all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
            "shard_size", "shard_slices"]
 
 
@@ -60,19 +60,14 @@ class JobConfigError(ConfigError, JobError):
     """A malformed job config (unknown key, wrong type), from the config helper: a `JobError`."""
 
 
-# A cheap CoACD setting: threshold 0.1 and preprocess resolution 30 are 2-3x faster than the
-# objects package's defaults (0.05 / 50) and give coarser but adequate pieces for the hold test
-# (NOTES §5). A job's `process` mapping overrides it field by field.
-FAST_PROCESS = {"coacd_threshold": 0.1, "coacd_preprocess_resolution": 30, "coacd_mcts_iterations": 60,
-                "coacd_mcts_nodes": 10}
-
-
 # fields that say how a job runs, not what it produces: outside the config hash, so a resumed
 # job may change them (a longer object timeout, more CPUs per shard)
 EXECUTION_FIELDS = ("object_timeout_s", "cpus_per_shard", "gpus_per_shard")
+# fields that are layers of the recipes: hashed through the resolved recipes they give (a job made
+# with the preset's values spelled out is the same job)
+RECIPE_FIELDS = ("preset", "synth", "eval", "process", "grid_resolution")
 MAX_SEED = 2**62                        # shard k uses seed + k; int64 columns hold it
 MAX_GRASPS_PER_OBJECT = 10_000
-MAX_GRID_RESOLUTION = 256               # 256^3 float32 = 64 MiB per object
 AUTO = "auto"                           # objects_per_shard chosen at the job's creation (`shard_size`)
 PREFERRED_PER_SHARD = 2                 # 4 targets (2 objects x 2 scales) per synthesis: its cheapest batch
 MAX_AUTO_PER_SHARD = 4                  # at most this many objects in an automatically sized shard
@@ -103,13 +98,15 @@ class JobConfig(Config):
                                         #: created for its object count and the cluster's worker slots
                                         #: (`shard_size`); job.json records the number chosen
     seed: int = 0                       #: base seed, 0 <= seed < 2**62; shard k synthesizes with seed + k
-    grid_resolution: int = 48           #: GraspTarget SDF grid nodes per axis, 8 to 256 (64: ~25 s/object
-                                        #: on one core, 48: ~10 s, 32: ~3 s); built once per object
     object_timeout_s: float = 300.0     #: per-object processing limit (isolated process); not hashed
-    process: dict[str, Any] = field(default_factory=lambda: dict(FAST_PROCESS))  #: ProcessConfig fields
-    synth: dict[str, Any] = field(default_factory=lambda: {"iters": 300, "seeds_per_grasp": FORCE_CLOSURE_SEEDS})
-    #: SynthConfig fields (multi-start: the best of 16 starts per grasp; benchmarks/results/quality.md)
+    # what the grasps are made with: the recipe of each task (`datagen.pipeline.resolve`), from the
+    # preset, the task's own synth block and these settings on top (unset keys: the preset's)
+    preset: str = DEFAULT_PRESET        #: settings preset (datagen.pipeline.PRESETS: dataset, paper)
+    synth: dict[str, Any] = field(default_factory=dict)  #: SynthConfig fields
     eval: dict[str, Any] = field(default_factory=dict)  #: EvalConfig fields
+    process: dict[str, Any] = field(default_factory=dict)  #: ProcessConfig fields (CoACD, ...)
+    grid_resolution: int | None = None  #: synthesis SDF grid nodes per axis, 8 to 256 (None: the preset's;
+                                        #: 64: ~25 s/object on one core, 48: ~10 s, 32: ~3 s)
     cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads and
                                         #: its evaluation processes (not hashed: keep it fixed within a
                                         #: job for identical floats)
@@ -139,26 +136,22 @@ class JobConfig(Config):
         need(bool(self.hand), "hand must name a hand")
         need(1 <= self.grasps_per_object <= MAX_GRASPS_PER_OBJECT,
              f"grasps_per_object must be in 1..{MAX_GRASPS_PER_OBJECT}, got {self.grasps_per_object}")
-        need(8 <= self.grid_resolution <= MAX_GRID_RESOLUTION,
-             f"grid_resolution must be in 8..{MAX_GRID_RESOLUTION}, got {self.grid_resolution}")
         need(self.objects_per_shard == AUTO or (isinstance(self.objects_per_shard, int) and self.objects_per_shard >= 1),
              f"objects_per_shard must be an int >= 1 or {AUTO!r}, got {self.objects_per_shard!r}")
         need(0 <= self.seed < MAX_SEED, f"seed must be an int in [0, 2**62), got {self.seed}")
         need(self.object_timeout_s > 0, f"object_timeout_s must be > 0 seconds, got {self.object_timeout_s}")
         need(self.cpus_per_shard > 0 and self.gpus_per_shard >= 0, "cpus_per_shard must be > 0, gpus_per_shard >= 0")
         try:
-            self.build_configs()  # validates the nested configs now, not in a worker
+            self.recipes()  # validates the settings now, not in a worker
         except (ValueError, TypeError) as exc:
             raise JobError(f"JobConfig: {exc}") from None
 
-    def build_configs(self):
-        """(ProcessConfig, SynthConfig, EvalConfig) of this job."""
-        from datagen.eval import EvalConfig
-        from datagen.objects.config import ProcessConfig
-        from datagen.synth import SynthConfig
-
-        return (ProcessConfig.from_dict(self.process), SynthConfig.from_dict(self.synth, where="job synth"),
-                EvalConfig.from_dict(self.eval))
+    def recipes(self) -> list:
+        """The resolved `datagen.pipeline.Recipe` of each task, in ``tasks`` order (they share the
+        process config and grid: the objects are processed once for all of them)."""
+        layer = {"preset": self.preset, "synth": self.synth, "eval": self.eval, "process": self.process,
+                 "grid_resolution": self.grid_resolution}
+        return [resolve(self.hand, t, config=layer, where="job config") for t in self.tasks]
 
     def check_runnable(self) -> None:
         """Refuse (JobError naming the value and the valid ones) a hand or task this machine
@@ -234,8 +227,11 @@ class JobConfig(Config):
         return d
 
     def hash(self) -> str:
-        """sha256 of the canonical JSON of `identity` (what decides the rows)."""
-        return hashlib.sha256(json.dumps(self.identity(), sort_keys=True, default=list).encode()).hexdigest()
+        """sha256 of the canonical JSON of `identity` and the resolved recipes (what decides the
+        rows: a changed library default or task YAML is a different job too)."""
+        config = {k: v for k, v in self.identity().items() if k not in RECIPE_FIELDS}
+        doc = {"config": config, "recipes": [r.to_dict() for r in self.recipes()]}
+        return hashlib.sha256(json.dumps(doc, sort_keys=True, default=list).encode()).hexdigest()
 
 
 def code_version() -> str:
@@ -350,19 +346,21 @@ class JobDir:
         if p.is_file():
             old = json.loads(p.read_text())
             if old.get("config_hash") != cfg.hash() and self._rehash(old) == cfg.hash():
-                # made before object_timeout_s left the hash: same rows, record the new hash
+                # made by an older version with the same resolved settings: same rows, record the new hash
                 old["config_hash"] = cfg.hash()
                 atomic_write_text(p, json.dumps(old, indent=1, sort_keys=True))
             if old.get("config_hash") != cfg.hash():
                 new, was = cfg.identity(), dict(old.get("config", {}))
                 diff = sorted(k for k in set(new) | set(was) if k not in EXECUTION_FIELDS and new.get(k) != was.get(k))
+                diff = diff or ["the resolved recipes (a library default, preset or task YAML changed)"]
                 raise JobError(f"job directory {self.path} holds a different job (config hash "
                                f"{str(old.get('config_hash'))[:12]} != {cfg.hash()[:12]}; fields differing: {diff}); "
                                "re-run with the same settings to resume, or use another --out")
             return True
         for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
             (self.path / d).mkdir(parents=True, exist_ok=True)
-        doc = {"config": cfg.to_dict(), "config_hash": cfg.hash(), "code_version": code_version(),
+        doc = {"config": cfg.to_dict(), "recipes": [r.to_dict() for r in cfg.recipes()],
+               "config_hash": cfg.hash(), "code_version": code_version(),
                "packages": package_versions(), "host": socket.gethostname(),
                "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         atomic_write_text(p, json.dumps(doc, indent=1, sort_keys=True))

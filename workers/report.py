@@ -122,12 +122,12 @@ def _render(job: JobDir, rows: pa.Table | None, n: int) -> tuple[list[tuple[str,
 def _render_rows(path: str, picked: list[dict]) -> tuple[list[str], str]:
     job = JobDir(path)
     try:
-        from datagen.eval import EvalConfig, build_scene
+        from datagen.eval import build_scene
         from datagen.eval.render import render_grasp
         from datagen.eval.table import row_pieces, row_poses
         from datagen.hands import load_hand
 
-        cfg = EvalConfig.from_dict(job.config().eval)
+        cfg = job.config().recipes()[0].eval
         paths, hands = [], {}
         for row in picked:
             hand = hands.setdefault(row["hand"], load_hand(row["hand"]))

@@ -154,7 +154,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     t_start, cpu_start, started = time.perf_counter(), time.process_time(), time.time()
     job = JobDir(job_path)
     cfg = JobConfig.from_dict(cfg_dict)
-    pcfg, scfg, ecfg = cfg.build_configs()
+    recipes = cfg.recipes()
+    pcfg = recipes[0].process  # the tasks share the objects' processing
     torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
@@ -195,8 +196,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         progress.total = len(entries) + total
         progress.set(len(entries) + done)
 
-    batch = run_batch(ready, hand, cfg.tasks, scfg, ecfg, grasps_per_object=cfg.grasps_per_object,
-                      seed=shard_seed(cfg, index), grid_resolution=cfg.grid_resolution, cache=cache, base=job.path,
+    batch = run_batch(ready, hand, recipes, grasps_per_object=cfg.grasps_per_object,
+                      seed=shard_seed(cfg, index), cache=cache, base=job.path,
                       device=device, progress=moved, eval_workers=max(1, int(cfg.cpus_per_shard)),
                       eval_spare_cores=_idle_cores())
     for f in batch.failures:
@@ -213,8 +214,10 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         "datagen.host": socket.gethostname(), "datagen.job_created_at": provenance["created_at"],
         "datagen.written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "datagen.shard": str(index), "datagen.seed": str(shard_seed(cfg, index)),
-        "datagen.synth_config": dataclasses.replace(scfg, seed=shard_seed(cfg, index)).to_dict(),
-        "datagen.eval_config": ecfg.to_dict(),
+        "datagen.recipes": [dataclasses.replace(r, synth=dataclasses.replace(r.synth, seed=shard_seed(cfg, index)))
+                            .to_dict() for r in recipes],
+        "datagen.synth_config": dataclasses.replace(recipes[0].synth, seed=shard_seed(cfg, index)).to_dict(),
+        "datagen.eval_config": recipes[0].eval.to_dict(),
         "datagen.process_config": pcfg.to_dict()}.items()})
     out = batch.rows.replace_schema_metadata(meta)
     if out.num_rows:

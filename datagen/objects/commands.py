@@ -1,11 +1,12 @@
-"""CLI subcommands of the objects package: ``manifest build`` and ``prepare``."""
+"""CLI subcommand of the objects package: ``manifest`` (``prepare`` is `datagen.pipeline.commands`'s: it
+processes with the recipe's settings, as a job does)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-__all__ = ["register_manifest", "register_prepare"]
+__all__ = ["register_manifest"]
 
 
 def register_manifest(sub: argparse._SubParsersAction) -> None:
@@ -51,32 +52,4 @@ def _manifest_check(args) -> int:
     from .manifest import load_manifest
 
     print(f"{args.manifest}: {len(load_manifest(args.manifest))} objects, valid")
-    return 0
-
-
-def register_prepare(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("prepare", help="process manifest objects into the cache")
-    p.add_argument("--manifest", required=True, help="manifest file (JSONL) of the objects to process")
-    p.add_argument("--config", default=None, help="YAML processing config (ProcessConfig fields)")
-    p.add_argument("--cache", default=None, help="cache root (default $DATAGEN_CACHE or ~/.cache/datagen)")
-    p.add_argument("--workers", type=int, default=1, help="objects processed in parallel")
-    p.add_argument("--limit", type=int, default=None, help="process only the first N objects")
-    p.add_argument("--timeout", type=float, default=None,
-                   help="seconds one object may take; it is then killed and recorded as a timeout failure "
-                        "(default: 600)")
-    p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
-    p.set_defaults(func=_prepare, interrupted="the objects finished so far are in the cache and are not processed "
-                   "again (no --results file was written); rerun the same command to process the rest")
-
-
-def _prepare(args) -> int:
-    from .config import ProcessConfig
-    from .prepare import DEFAULT_TIMEOUT_S, prepare, summarize, write_results
-
-    cfg = ProcessConfig.from_yaml(args.config) if args.config else ProcessConfig()
-    results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit,
-                      timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
-    if args.results:
-        write_results(results, args.results)
-    print(summarize(results))
     return 0

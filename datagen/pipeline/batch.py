@@ -1,7 +1,7 @@
 """The batch pipeline as one pure function: processed objects -> evaluated rows.
 
-    objects = [BatchObject(process_object(ref), scales=(0.06, 0.08))]
-    out = run_batch(objects, load_hand("shadow"), ["force_closure"], SynthConfig(), EvalConfig(),
+    objects = [BatchObject(process_object(ref, recipe.process), scales=(0.06, 0.08))]
+    out = run_batch(objects, load_hand("shadow"), [resolve("shadow", "force_closure")],
                     grasps_per_object=8, seed=0)
     out.rows       # pyarrow Table of the `evaluated` schema (schemas/evaluated.json), no metadata
     out.failures   # one dict per failed object/stage: object_id, object_scale_m, task, stage, reason, message
@@ -12,8 +12,9 @@ synthesized rows without evaluating them) or swap one (a benchmark executing oth
 1. `build_targets`: one `GraspTarget` per object and scale. The SDF and its grid are in
    normalized units, so they are built once per object (at its first scale) and the hull samples
    are rescaled for the other scales.
-2. per task (its objects paired by `datagen.tasks.task_targets`): `synthesize_rows`, one batch
-   for every target of the task, seeded by ``seed``; rows of the ``grasps`` schema.
+2. per recipe (one per task, `datagen.pipeline.resolve`; its objects paired by
+   `datagen.tasks.task_targets`): `synthesize_rows`, one batch for every target of the task,
+   seeded by ``seed``; rows of the ``grasps`` schema.
 3. `evaluate_rows`: the MuJoCo test, per object and scale, so one bad object costs only its rows.
 
 Anything that fails for an object (its target, the batch's synthesis, its evaluation) becomes a
@@ -124,13 +125,11 @@ def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, 
                     splits: Mapping[str, str] | None = None, callback=None):
     """``(SynthesisResult, table)``: ``grasps_per_object`` grasps on every target in one batch
     (`datagen.synth.synthesize`, seeded by ``cfg.seed``) and their rows (``grasps`` schema,
-    `datagen.synth.rows.result_table`). The task's own ``synth:`` block lies under ``cfg``
-    (`SynthConfig.for_task`: fields ``cfg`` sets away from the defaults win). ``callback(it, ...)``
-    is the optimizer's per-iteration hook."""
+    `datagen.synth.rows.result_table`). ``cfg`` is the task's resolved `SynthConfig`
+    (``resolve(...).synth``). ``callback(it, ...)`` is the optimizer's per-iteration hook."""
     from datagen.synth import synthesize
     from datagen.synth.rows import result_table
 
-    cfg = cfg.for_task(task)
     result = synthesize(hand, list(targets), task, cfg, grasps_per_object, callback=callback)
     return result, result_table(result, list(targets), hand, task, cfg, splits=splits)
 
@@ -178,30 +177,30 @@ def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, 
     return out
 
 
-def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, eval_cfg, *,
-              grasps_per_object: int, seed: int | None = None, grid_resolution: int | None = None,
-              cache: str | Path | None = None, base: str | Path = ".", device: str = "cpu",
+def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps_per_object: int,
+              seed: int | None = None, cache: str | Path | None = None, base: str | Path = ".", device: str = "cpu",
               progress: Progress | None = None, eval_workers: int = 1,
               eval_spare_cores: Callable[[], int] | None = None) -> BatchResult:
     """Processed objects -> evaluated rows (see the module docstring).
 
-    ``hand``: a `datagen.hands.HandModel` on ``device``; ``tasks``: `TaskSpec`s or names/YAML
-    paths (`datagen.tasks.load_task`); ``synth_cfg`` (`SynthConfig`) with its seed replaced by
-    ``seed`` when given; ``eval_cfg`` (`EvalConfig`); ``grasps_per_object`` per object and scale;
-    ``grid_resolution`` and ``cache``: see `build_targets`; ``base``: the directory the objects'
-    ``object_path`` values are relative to; ``eval_workers``: processes for the MuJoCo tests
-    and ``eval_spare_cores`` (`evaluate_rows`). ``progress(done, total)`` in work units: one per
-    object's target, then per task as many for its synthesis (moving with its iterations) and as
-    many again for its evaluation as there are objects x scales."""
-    from datagen.tasks import load_task, task_targets
+    ``hand``: a `datagen.hands.HandModel` on ``device``; ``recipes``: one resolved `Recipe` per
+    task (`datagen.pipeline.resolve`, same hand and grid resolution), each synthesizing with its
+    ``synth`` (seed replaced by ``seed`` when given) and evaluating with its ``eval``;
+    ``grasps_per_object`` per object and scale; ``cache``: see `build_targets`; ``base``: the
+    directory the objects' ``object_path`` values are relative to; ``eval_workers``: processes
+    for the MuJoCo tests and ``eval_spare_cores`` (`evaluate_rows`). ``progress(done, total)``
+    in work units: one per object's target, then per task as many for its synthesis (moving with
+    its iterations) and as many again for its evaluation as there are objects x scales."""
+    from datagen.tasks import task_targets
 
     timings = {"target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0}
     fails: list[dict] = []
     tables: list[pa.Table] = []
-    if seed is not None:
-        synth_cfg = dataclasses.replace(synth_cfg, seed=seed)
+    grids = {r.grid_resolution for r in recipes}
+    if len(grids) > 1:
+        raise ValueError(f"run_batch: the recipes must share one grid_resolution, got {sorted(grids)}")
     n_targets = sum(len(o.scales) for o in objects)
-    total = len(objects) + 2 * len(tasks) * n_targets
+    total = len(objects) + 2 * len(recipes) * n_targets
     done = 0.0
 
     def report(units: float, absolute: bool = False) -> None:
@@ -211,14 +210,16 @@ def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, 
             progress(min(done, total), total)
 
     t0 = time.perf_counter()
-    all_targets = build_targets(objects, grid_resolution=grid_resolution, cache=cache, device=device,
-                                failures=fails, progress=lambda: report(1))
+    all_targets = build_targets(objects, grid_resolution=grids.pop() if grids else None, cache=cache,
+                                device=device, failures=fails, progress=lambda: report(1))
     timings["target_s"] = time.perf_counter() - t0
     report(len(objects), absolute=True)
     splits = {o.object_id: o.split for o in objects}
-    for k, task in enumerate(tasks):
+    for k, recipe in enumerate(recipes):
         report(len(objects) + 2 * k * n_targets, absolute=True)
-        task = load_task(task) if isinstance(task, (str, Path)) else task
+        task, synth_cfg = recipe.load_task(), recipe.synth
+        if seed is not None:
+            synth_cfg = dataclasses.replace(synth_cfg, seed=seed)
         targets = task_targets(task, all_targets)
         if not targets:
             continue
@@ -240,7 +241,7 @@ def run_batch(objects: Sequence[BatchObject], hand, tasks: Sequence, synth_cfg, 
         timings["synth_s"] += time.perf_counter() - t0
         report(start + n_targets, absolute=True)
         t0 = time.perf_counter()
-        tables += evaluate_rows(table, targets, task.name, eval_cfg, base=base, failures=fails,
+        tables += evaluate_rows(table, targets, task.name, recipe.eval, base=base, failures=fails,
                                 progress=lambda: report(n_targets / len(targets)), workers=eval_workers,
                                 spare_cores=eval_spare_cores)
         timings["eval_s"] += time.perf_counter() - t0

@@ -1,7 +1,8 @@
 """CLI: ``datagen synth --hand shadow --object PATH --task force_closure --num 100 --out F.parquet``.
 
 The synthesis half of the pipeline (`datagen.pipeline`: target -> synthesis -> rows) on one
-object; ``datagen eval`` evaluates the table it writes."""
+object, with the recipe a job resolves (`datagen.pipeline.resolve`); ``datagen eval`` evaluates
+the table it writes."""
 
 from __future__ import annotations
 
@@ -9,35 +10,51 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["load_object", "register_synth"]
+__all__ = ["add_recipe_arguments", "read_config", "recipe_flags", "register_prepare", "register_synth"]
 
 
-def load_object(path: str | Path, cache: str | None = None, process_config: str | None = None):
-    """The processed object (`datagen.objects.ProcessedObject`, status ok) of a raw mesh file
-    (processed through the objects cache, in a child process as `datagen prepare` does it: a
-    Ctrl-C or a CoACD crash ends only that process) or of a processed-object directory (one holding
-    ``meta.json``). Raises FileNotFoundError or ValueError naming the object and the reason."""
-    from datagen.objects import layout
-    from datagen.objects.config import ProcessConfig
-    from datagen.objects.isolate import process_isolated
-    from datagen.objects.manifest import ManifestEntry
-    from datagen.objects.prepare import DEFAULT_TIMEOUT_S
-    from datagen.objects.process import load_processed
-    from datagen.objects.sources import resolve
+def add_recipe_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags that set a recipe (`datagen.pipeline.resolve`), shared by ``synth`` and ``run``:
+    each is unset unless given, so a flag equal to a default still wins over a task's block."""
+    p.add_argument("--preset", default=None, help="settings preset: dataset (a job's, the default) or paper "
+                   "(one start per pose, 500 iterations)")
+    p.add_argument("--iters", type=int, default=None, help="optimizer iterations (default: the preset's)")
+    p.add_argument("--seeds", type=int, default=None, dest="seeds_per_grasp",
+                   help="multi-start: initial poses per output grasp, the best after seed_select_iter iterations "
+                        "goes on (default: the preset's, or the task's)")
 
-    p = Path(path)
-    if p.is_dir() and (p / layout.META).is_file():
-        processed = load_processed(p)
-    elif p.is_file():
-        ref = resolve(f"dir:{p.parent.resolve()}", p.name, p.stem)
-        cfg = ProcessConfig.from_yaml(process_config) if process_config else ProcessConfig()
-        processed = process_isolated(ManifestEntry.of_ref(ref), cfg, cache, DEFAULT_TIMEOUT_S,
-                                     remedy="process it first with `datagen prepare --timeout SECONDS`")
-    else:
-        raise FileNotFoundError(f"object {p} is neither a mesh file nor a processed-object directory")
-    if not processed.ok:
-        raise ValueError(f"object {p}: processing failed ({processed.reason}): {processed.message}")
-    return processed
+
+def recipe_flags(args) -> dict:
+    """The recipe layer of the flags `add_recipe_arguments` added (only those given)."""
+    synth = {k: v for k, v in (("iters", args.iters), ("seeds_per_grasp", args.seeds_per_grasp)) if v is not None}
+    out = {"synth": synth} if synth else {}
+    if args.preset is not None:
+        out["preset"] = args.preset
+    return out
+
+
+def read_config(path: str | None) -> dict:
+    """The config file's mapping ({} for None): bounded YAML (`datagen.objects.config.read_yaml`);
+    raises `ConfigError` naming the file for anything but a mapping, and for SynthConfig fields at
+    the top level (they belong under ``synth:``)."""
+    from datagen.errors import ConfigError
+    from datagen.objects.config import read_yaml
+    from datagen.synth import SynthConfig
+
+    if path is None:
+        return {}
+    try:
+        data = read_yaml(path, "config")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a config must be a mapping (preset, synth, eval, process, ...)")
+    loose = sorted(set(data) & set(SynthConfig.__dataclass_fields__))
+    if loose:
+        raise ConfigError(f"{path}: SynthConfig fields {loose} at the top level", "put them under `synth:`")
+    return data
 
 
 def register_synth(sub: argparse._SubParsersAction) -> None:
@@ -48,13 +65,10 @@ def register_synth(sub: argparse._SubParsersAction) -> None:
                    help="object size(s), metres per normalized object unit (not a count)")
     p.add_argument("--task", default="force_closure", help="built-in task name or task YAML")
     p.add_argument("--num", type=int, default=100, help="grasps per object scale")
-    p.add_argument("--iters", type=int, default=None, help="optimizer iterations (default: config)")
-    p.add_argument("--config", default=None, help="YAML of SynthConfig fields")
-    p.add_argument("--seed", type=int, default=None, help="synthesis seed (default: the config's, 0)")
-    p.add_argument("--seeds", type=int, default=None, dest="seeds_per_grasp",
-                   help="multi-start: initial poses per output grasp, the best of them after seed_select_iter "
-                        "iterations goes on (default: for force closure without --config, the job default "
-                        "datagen.synth.config.FORCE_CLOSURE_SEEDS; else the config's)")
+    p.add_argument("--config", default=None, help="YAML config: preset, synth, eval, process, grid_resolution "
+                   "mappings (a job config file works: its other keys are ignored); the flags go on top")
+    add_recipe_arguments(p)
+    p.add_argument("--seed", type=int, default=None, help="synthesis seed (default: 0)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
     p.add_argument("--out", required=True, help="output Parquet file")
@@ -65,39 +79,32 @@ def register_synth(sub: argparse._SubParsersAction) -> None:
 def _synth(args) -> int:
     if args.num < 1:
         raise ValueError(f"--num must be >= 1 (grasps per object scale), got {args.num}")
-    import dataclasses
-
     import pyarrow.parquet as pq
     import torch
-    import yaml
 
     from datagen._atomic import atomic_path
     from datagen.hands import load_hand
-    from datagen.pipeline import BatchObject, build_targets, synthesize_rows
-    from datagen.synth import SynthConfig
-    from datagen.tasks import load_task
 
-    cfg = SynthConfig.from_dict(yaml.safe_load(Path(args.config).read_text()) if args.config else {}, where=args.config or "defaults")
-    from datagen.synth.config import FORCE_CLOSURE_SEEDS
+    from .api import load_object
+    from .batch import BatchObject, build_targets, synthesize_rows
+    from .recipe import merge_layers, resolve
 
-    if args.seeds_per_grasp is None and args.config is None and args.task == "force_closure":
-        args.seeds_per_grasp = FORCE_CLOSURE_SEEDS
-    overrides = {k: v for k, v in (("iters", args.iters), ("seed", args.seed),
-                                   ("seeds_per_grasp", args.seeds_per_grasp)) if v is not None}
-    cfg = dataclasses.replace(cfg, **overrides)
+    flags = merge_layers(recipe_flags(args), {"synth": {"seed": args.seed}} if args.seed is not None else {})
+    recipe = resolve(args.hand, args.task, config=read_config(args.config), flags=flags,
+                     where=args.config or "config")
+    cfg = recipe.synth
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     hand = load_hand(args.hand, device=device)
-    task = load_task(args.task)
-    processed = load_object(args.object, args.cache)
-    # one batch object per scale: each target built at its own scale (grid from the grid cache)
-    targets = build_targets([BatchObject(processed, (s,)) for s in args.scale], cache=args.cache, device=device)
+    processed = load_object(args.object, recipe.process, args.cache)
+    targets = build_targets([BatchObject(processed, tuple(args.scale))], grid_resolution=recipe.grid_resolution,
+                            cache=args.cache, device=device)
 
     def progress(it, x, e, ok):
         if sys.stderr.isatty() and (it % 50 == 0 or it == cfg.iters - 1):
             print(f"\r  iter {it + 1}/{cfg.iters}  energy {e.mean():.4f}  accepted {ok.float().mean():.0%}",
                   end="", file=sys.stderr, flush=True)
 
-    result, table = synthesize_rows(hand, targets, task, cfg, args.num, callback=progress)
+    result, table = synthesize_rows(hand, targets, recipe.load_task(), cfg, args.num, callback=progress)
     usable = int(result.usable(cfg.contact_threshold_m).sum())
     if usable == 0:
         e = {k: float(v.mean()) for k, v in result.energies.items()}
@@ -112,4 +119,35 @@ def _synth(args) -> int:
         pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
           f"({result.timings['optimize_s']:.1f} s optimizing on {device})")
+    return 0
+
+
+def register_prepare(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("prepare", help="process manifest objects into the cache")
+    p.add_argument("--manifest", required=True, help="manifest file (JSONL) of the objects to process")
+    p.add_argument("--preset", default=None, help="settings preset whose processing is used (default: dataset, "
+                   "so a job reuses the objects)")
+    p.add_argument("--config", default=None, help="YAML config; its process mapping (ProcessConfig fields) is used")
+    p.add_argument("--cache", default=None, help="cache root (default $DATAGEN_CACHE or ~/.cache/datagen)")
+    p.add_argument("--workers", type=int, default=1, help="objects processed in parallel")
+    p.add_argument("--limit", type=int, default=None, help="process only the first N objects")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one object may take; it is then killed and recorded as a timeout failure "
+                        "(default: 600)")
+    p.add_argument("--results", default=None, help="write one status line per object (JSONL)")
+    p.set_defaults(func=_prepare, interrupted="the objects finished so far are in the cache and are not processed "
+                   "again (no --results file was written); rerun the same command to process the rest")
+
+
+def _prepare(args) -> int:
+    from datagen.objects.prepare import DEFAULT_TIMEOUT_S, prepare, summarize, write_results
+
+    from .recipe import resolve
+
+    cfg = resolve(preset=args.preset, config=read_config(args.config), where=args.config or "config").process
+    results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit,
+                      timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
+    if args.results:
+        write_results(results, args.results)
+    print(summarize(results))
     return 0

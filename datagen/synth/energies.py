@@ -32,7 +32,7 @@ from datagen.synth.penetration import sphere_penetration
 from datagen.synth.scenery import Scenery
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
 from datagen.synth.stacked import grid_query
-from datagen.wrench import pinch_antipodal_error, task_energy
+from datagen.wrench import pinch_antipodal_error
 from datagen.wrench.tws import task_wrench_at_contacts
 
 __all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
@@ -175,12 +175,9 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     w = cfg.weights
     if w.task > 0:
         w_t = list(task.w_t) if task_origin is None else task_wrench_at_contacts(
-            task.w_t, state.contact_points, task_origin.to(state.contact_points.dtype), normalize=cfg.normalize)
-        e_task = task_energy(
-            state.contact_points, state.contact_normals, cfg.mu, w_t, task.gamma_deg, directions,
-            kind=cfg.task_energy_kind, delta_deg=cfg.delta_deg, normalize=cfg.normalize,
-            contact_model=cfg.contact_model, torsional_mu=cfg.torsional_mu,
-        ) / directions.shape[0]
+            task.w_t, state.contact_points, task_origin.to(state.contact_points.dtype), normalize=cfg.contact.normalize)
+        e_task = cfg.contact.task_energy(state.contact_points, state.contact_normals, w_t, task.gamma_deg, directions,
+                                         kind=cfg.task_energy_kind) / directions.shape[0]
         if cfg.pinch_antipodal > 0 and task.gamma_deg >= 180 and state.contact_points.shape[-2] == 2:
             # a two-finger pinch: E_t cannot see how far its normals turn from its axis (wrench/antipodal.py)
             e_task = e_task + cfg.pinch_antipodal * pinch_antipodal_error(state.contact_points, state.contact_normals)

@@ -83,25 +83,22 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         closure = task.gamma_deg >= 180
-        by_epsilon = cfg.weights.task > 0 and (closure or cfg.task_seed_score)
-        if by_epsilon and tip_spheres.numel() >= (2 if closure else 1):
+        if cfg.weights.task > 0 and tip_spheres.numel() >= (2 if closure else 1):
             tips = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
-            eps = link_epsilon(p, n, touching, cfg.mu, normalize=cfg.normalize,
+            eps = link_epsilon(p, n, touching, cfg.contact.mu, normalize=cfg.contact.normalize,
                                task=None if closure else (task.w_t, task.gamma_deg),
                                task_origin=None if closure else task_origin).to(energy.dtype)
             score = score + 1e3 * torch.where(usable, eps, torch.zeros_like(eps))
         return score
 
 
-def top_seeds(score: torch.Tensor, S: int, k: int = 1) -> torch.Tensor:
-    """``(B k,)`` rows of the ``k`` best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1``
-    of ``score (B S,)``), best first within each grasp."""
-    s = score.reshape(-1, S)
-    rows = s.argmax(-1, keepdim=True) if k == 1 else s.topk(min(k, S), dim=-1).indices  # (B, k)
-    return (rows + torch.arange(rows.shape[0], device=rows.device)[:, None] * S).reshape(-1)
+def top_seeds(score: torch.Tensor, S: int) -> torch.Tensor:
+    """``(B,)`` row of the best of each grasp's ``S`` seeds (rows ``b S .. b S + S - 1`` of
+    ``score (B S,)``)."""
+    return score.reshape(-1, S).argmax(-1) + torch.arange(score.shape[0] // S, device=score.device) * S
 
 
 def best_seeds(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,

@@ -1,18 +1,19 @@
-"""Pregrasp and squeeze poses that move the contact fingertips along their contact normals.
+"""Pregrasp and squeeze poses: balanced grip forces along the contact normals.
 
 A grasp is executed by position-controlled fingers: the hand closes from the pregrasp to the
 grasp, then its actuator targets move on to the squeeze pose, and the gap between the squeeze
-targets and where the object stops the fingers sets the grip forces (tau = kp dq). Opening every
-joint towards the open pose (the naive pregrasp) also moves abduction joints sideways, so the
-squeeze pushes fingers across the object and pushes it out of the hand. Here each task
-fingertip's contact sphere instead moves ``distance_m`` straight out along its contact normal at
-the pregrasp, and straight in at the squeeze (``squeeze = 2 grasp - pregrasp``): the squeeze
-forces point along the normals the GWS was computed with. The default "force" mode
-(:func:`force_squeeze`) instead chooses balanced grip forces; on a mounted task object (a hinge
-or a slide) only their net force along the joint's motion must cancel (:func:`joint_mobility`):
-the bearing takes the rest.
+targets and where the object stops the fingers sets the grip forces (tau = kp dq).
+:func:`force_squeeze` chooses the task fingertips' forces with the smallest net wrench within
+their friction cones (:func:`balanced_forces`) and turns them into joint offsets through the
+actuators' compliance; the pregrasp is the mirror image (``pregrasp = 2 grasp - squeeze``), so
+the fingers open along the same directions the squeeze presses. On a mounted task object (a
+hinge or a slide) only the net force along the joint's motion must cancel
+(:func:`joint_mobility`): the bearing takes the rest. (Three other constructions, moving the
+fingertips a fixed distance along the normals, opening every joint towards the open pose, and
+balancing the whole hand's contacts, were measured and not adopted: benchmarks/results/squeeze.md;
+their code is in git at 2ce0499.)
 
-The joint displacement is the damped least-squares solution ``dq = J^T (J J^T + lambda^2 I)^-1 e``
+The fingertip motion is the damped least-squares solution ``dq = J^T (J J^T + lambda^2 I)^-1 e``
 of the fingertips' positional Jacobian ``J (3F, J)`` (joints shared by several fingertips, e.g.
 the wrist, are held fixed), ``e (3F,)`` the wanted fingertip displacements: a first-order step,
 exact to O(distance^2).
@@ -27,8 +28,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["backtrack_pregrasp", "balanced_forces", "force_squeeze", "grip_forces", "hand_squeeze", "joint_squeeze",
-           "joint_mobility", "actuator_compliance", "normal_squeeze", "point_jacobian", "pregrasp_and_squeeze", "tip_jacobian"]
+__all__ = ["actuator_compliance", "backtrack_pregrasp", "balanced_forces", "force_squeeze", "grip_forces",
+           "joint_mobility", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -64,26 +65,22 @@ def _balance(f: torch.Tensor, unit_mobility: torch.Tensor | None = None) -> torc
 
 
 def grip_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, force_n: float,
-                min_normal: torch.Tensor | None = None, active: torch.Tensor | None = None,
-                mount: tuple | None = None, scale_count: int | None = None) -> torch.Tensor:
-    """``(B, C, 3)`` N: the :func:`balanced_forces` of each sample, scaled so that the largest of
-    its first ``scale_count`` contacts (all: None) is ``force_n`` times the set's balance
-    (:func:`_balance`). ``mount`` ``(kind, axis, anchor_m, mounted (B,) bool)``: the samples on a
-    mounted object balance only the force along its joint (:func:`joint_mobility`; None: every
-    sample is free)."""
+                mount: tuple | None = None) -> torch.Tensor:
+    """``(B, C, 3)`` N: the :func:`balanced_forces` of each sample, scaled so that the largest is
+    ``force_n`` times the set's balance (:func:`_balance`). ``mount`` ``(kind, axis, anchor_m,
+    mounted (B,) bool)``: the samples on a mounted object balance only the force along its joint
+    (:func:`joint_mobility`; None: every sample is free)."""
     mounted = torch.zeros(points.shape[0], dtype=torch.bool, device=points.device) if mount is None else mount[3]
-    on = points.new_ones(points.shape[:2]) if active is None else active.to(points.dtype)
+    on = points.new_ones(points.shape[:2])
     f = torch.empty_like(points)
     balance = points.new_empty(points.shape[0])
     for rows, joint in ((~mounted).nonzero().squeeze(-1), None), (mounted.nonzero().squeeze(-1), mount):
         if rows.numel() == 0:
             continue
-        sub = {k: None if v is None else v[rows] for k, v in dict(min_normal=min_normal, active=active).items()}
         u = None if joint is None else joint_mobility(points[rows], *joint[:3])
-        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=u, **sub)
+        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=u)
         balance[rows] = _balance(f[rows], None if u is None else _unit_mobility(u, on[rows]))
-    k = f.shape[1] if scale_count is None else scale_count
-    return f * (force_n * balance / f[:, :k].norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    return f * (force_n * balance / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
 
 
 def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m):
@@ -95,27 +92,6 @@ def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approac
     dq_gap = _damped_step(J_tips, approach_m * inward_normals, damping_m)
     squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
     return hand.apply_couplings(2 * joints - squeeze), squeeze
-
-
-def normal_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
-                   inward_normals: torch.Tensor, distance_m: float, movable: torch.Tensor,
-                   damping_m: float = 0.01) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(pregrasp, squeeze)`` joints ``(B, J)`` (coupled, within limits) for grasp ``joints``.
-
-    Args:
-        root_pose: ``(B, 7)`` hand root [x y z qw qx qy qz] (kept fixed).
-        joints: ``(B, J)`` grasp joints, radians.
-        tip_spheres: ``(F,)`` contact sphere index of each task fingertip.
-        inward_normals: ``(B, F, 3)`` unit contact normals pointing into the object.
-        distance_m: how far each fingertip moves out (pregrasp) and in (squeeze).
-        movable: ``(J,)`` bool, joints the motion may use (False: held at the grasp).
-        damping_m: lambda of the damped least squares, m/rad (keeps dq bounded near singularities).
-    """
-    J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
-    dq = _damped_step(J, -distance_m * inward_normals, damping_m)  # outward motion of each fingertip
-    pre = hand.apply_couplings(joints + dq)
-    squeeze = hand.apply_couplings(2 * joints - pre)
-    return pre, squeeze
 
 
 def joint_mobility(points: torch.Tensor, kind: str, axis, anchor_m) -> torch.Tensor:
@@ -208,28 +184,6 @@ def _fista(n, lo, w, mu, iters, step, grad_fn):
     return f
 
 
-def point_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, links: torch.Tensor,
-                   points: torch.Tensor) -> torch.Tensor:
-    """``(B, 3C, J)`` d(points)/d(joints), m/rad, through the joint couplings, for world ``points
-    (B, C, 3)`` carried by hand links ``links (B, C)`` (indices into the hand's links)."""
-    B, J = joints.shape
-    C = links.shape[1]
-    R = 3 * C
-    with torch.no_grad():
-        T0 = hand.link_transforms(root_pose.detach(), hand.apply_couplings(joints.detach()))
-        rows = torch.arange(B, device=joints.device)[:, None]
-        Tl = T0[rows, links]  # (B, C, 4, 4)
-        local = (Tl[..., :3, :3].transpose(-1, -2) @ (points - Tl[..., :3, 3])[..., None]).squeeze(-1)
-    with torch.enable_grad():  # one pass over R copies of the batch: copy r carries output row r
-        q = joints.detach().repeat(R, 1).requires_grad_(True)  # (R B, J)
-        T = hand.link_transforms(root_pose.detach().repeat(R, 1), hand.apply_couplings(q)).reshape(R, B, -1, 4, 4)
-        Ti = T[:, rows, links]  # (R, B, C, 4, 4)
-        x = ((Ti[..., :3, :3] @ local[None, ..., None]).squeeze(-1) + Ti[..., :3, 3]).reshape(R, B, R)
-        r = torch.arange(R, device=joints.device)
-        (g,) = torch.autograd.grad(x[r, :, r].sum(), q)
-    return g.reshape(R, B, J).transpose(0, 1)
-
-
 def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
     """``(J, J)`` P such that the squeeze displacement ``dq = P tau / kp`` makes the hand's position
     actuators (stiffness ``kp`` each, transmissions ``ctrl = A q``, A = ``hand.ctrl_matrix``)
@@ -276,68 +230,6 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
     f = grip_forces(points, inward_normals, mu, force_n, mount=mount)
     return _grip(hand, joints, J, f, J, inward_normals, movable, kp, approach_m, damping_m)
-
-
-def hand_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
-                 points: torch.Tensor, inward_normals: torch.Tensor, link_points: torch.Tensor,
-                 link_normals: torch.Tensor, link_touching: torch.Tensor, mu: float, kp: float, force_n: float,
-                 approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
-                 mount: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze balances the whole hand's contacts.
-
-    As :func:`force_squeeze`, but the balanced forces are solved over every contact the closed
-    hand makes, not the task fingertips alone: the fingertips (``points``/``inward_normals``
-    ``(B, F, 3)``, each gripping with a normal force >= 1) and every other link touching the
-    object (``link_points``/``link_normals`` ``(B, L, 3)``, ``link_touching (B, L)``, in the hand's
-    link order as :func:`datagen.synth.select.link_contacts` gives them; normal force >= 0: they may
-    carry load but need not). A phalanx or the palm resting on the object takes part of the grip,
-    so the fingertips' forces no longer have to cancel among themselves, and the joint torques
-    ``tau = sum_c J_c^T f_c`` include the phalanges' share. The palm (no movable joint) only
-    reacts. Scaled so the largest fingertip force is ``force_n`` times the set's balance.
-    ``mount``: as in :func:`force_squeeze`.
-    """
-    B, F = points.shape[:2]
-    tip_links = hand.sphere_link_index[tip_spheres]  # (F,)
-    links = hand.sphere_link_index.unique()  # (L,) the link order of link_contacts
-    others = link_touching & ~(links[:, None] == tip_links[None, :]).any(-1)[None, :]  # (B, L)
-    P = torch.cat([points, link_points], 1)
-    N = torch.cat([inward_normals, link_normals], 1)
-    active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), others], 1)
-    lo = torch.cat([P.new_ones(B, F), P.new_zeros(B, links.shape[0])], 1)
-    f = grip_forces(P, N, mu, force_n, min_normal=lo, active=active, scale_count=F, mount=mount)
-    all_links = torch.cat([tip_links.expand(B, F), links.expand(B, -1)], 1)
-    Jc = point_jacobian(hand, root_pose, joints, all_links, P) * movable.to(joints.dtype)  # (B, 3C, J)
-    Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)
-    return _grip(hand, joints, Jc, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
-
-
-def joint_squeeze(hand, joints: torch.Tensor, squeeze_rad: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The naive construction: every joint opens by up to ``squeeze_rad`` towards the hand's open
-    pose (pregrasp) and closes as much past the grasp (squeeze). ``joints (B, J)`` radians."""
-    pre = hand.apply_couplings(joints + (hand.open_pose - joints).clamp(-squeeze_rad, squeeze_rad))
-    return pre, hand.clamp_joints(2 * joints - pre)
-
-
-def pregrasp_and_squeeze(hand, cfg, root_pose, joints, tip_spheres, points, inward_normals, movable,
-                         link_contacts=None, mount=None):
-    """``(pregrasp, squeeze)`` joints by ``cfg.squeeze_mode`` (a :class:`datagen.synth.SynthConfig`).
-
-    ``link_contacts``: ``(points (B, L, 3), inward normals (B, L, 3), touching (B, L))`` of every
-    link (:func:`datagen.synth.select.link_contacts`), needed by the "hand" mode. ``mount``:
-    ``(kind, axis, anchor_m, mounted (B,) bool)``, the joint of a mounted task object and the
-    samples on it (None: every object is free); the "force" and "hand" modes then balance only
-    the force along that joint."""
-    if cfg.squeeze_mode == "hand":
-        if link_contacts is None:
-            raise ValueError("squeeze_mode 'hand' needs the links' contacts")
-        return hand_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, *link_contacts, cfg.mu,
-                            cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m, movable, mount=mount)
-    if cfg.squeeze_mode == "force":
-        return force_squeeze(hand, root_pose, joints, tip_spheres, points, inward_normals, cfg.mu, cfg.squeeze_kp,
-                             cfg.squeeze_force_n, cfg.squeeze_gap_m, movable, mount=mount)
-    if cfg.squeeze_mode == "normal":
-        return normal_squeeze(hand, root_pose, joints, tip_spheres, inward_normals, cfg.squeeze_m, movable)
-    return joint_squeeze(hand, joints, cfg.squeeze_rad)
 
 
 def backtrack_pregrasp(hand, grasp: torch.Tensor, pregrasp: torch.Tensor, depth_fn, slack_m: float = 5e-4,

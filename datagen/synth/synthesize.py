@@ -28,11 +28,10 @@ from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_ob
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
 from datagen.synth.scenery import Scenery
-from datagen.synth.select import link_contacts, seed_scores, top_seeds
+from datagen.synth.select import seed_scores, top_seeds
 from datagen.synth.self_collision import SelfPairList
-from datagen.synth.squeeze import backtrack_pregrasp, pregrasp_and_squeeze
-from datagen.synth.touch import touch_grasp
-from datagen.wrench import epsilon_metric, sample_directions
+from datagen.synth.squeeze import backtrack_pregrasp, force_squeeze
+from datagen.wrench import sample_directions
 
 __all__ = ["SynthesisResult", "finger_joint_groups", "finger_joint_mask", "synthesize"]
 
@@ -187,105 +186,131 @@ def _run_split(opt: GroupedDescent, energy_on, x: PoseVariables, index: torch.Te
     return xs, torch.cat([o[1] for o in out])[back], {k: torch.cat([o[2][k] for o in out])[back] for k in out[0][2]}
 
 
-def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
-               generator: torch.Generator | None = None, callback=None, threads: int | None = None) -> SynthesisResult:
-    """Optimize ``num_per_object`` poses on each target; see the module docstring. ``threads``
-    (default: torch's intra-op thread count): on the CPU, a large batch (the seeds' first
-    iterations) runs in up to that many parts at once (`_run_split`; the poses do not depend on it)."""
-    import time
+@dataclass
+class _Batch:
+    """What one synthesis batch is made of (set up once by `_setup`)."""
 
-    t0 = time.perf_counter()
-    cfg = cfg.for_hand(hand)
-    threads = torch.get_num_threads() if threads is None else int(threads)
-    task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
-    gen = generator or torch.Generator().manual_seed(cfg.seed)
+    object_index: torch.Tensor  # (B,) target of each output grasp
+    seed_index: torch.Tensor  # (B S,) target of each start
+    finger_index: list  # the task fingertips (indices into hand.fingertip_names)
+    tip_spheres: torch.Tensor  # (F,) their contact spheres
+    scenery: object  # a mounted task object's fixed parts, or None
+    root: torch.Tensor  # (B S, 7) initial root poses
+    joints: torch.Tensor  # (B S, J) initial joints, coupled
+    directions: torch.Tensor  # (K, 6) wrench directions
+
+
+def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator) -> _Batch:
+    """The batch's indices, the task fingertips, the initial poses and the wrench directions
+    (drawn from ``gen`` in that order)."""
     dev, dt = hand.device, hand.dtype
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)
     finger_index = _resolve_fingers(hand, task)
-    tip_spheres = contact_sphere_index(hand)[finger_index]
-    S = cfg.seeds_per_grasp
-    seed_index = object_index.repeat_interleave(S)  # (B S,) seeds of grasp b: rows b S .. b S + S - 1
+    seed_index = object_index.repeat_interleave(cfg.seeds_per_grasp)  # seeds of grasp b: rows b S .. b S + S - 1
     scenery = Scenery.for_task(task, targets, dev, dt)  # a mounted object's door, housing or cabinet
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
-    joints = hand.apply_couplings(joints)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
+    return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,
+                  root, hand.apply_couplings(joints), directions)
 
-    def energy_on(index):  # one optimizer run on one batch (its own self-collision pair lists)
+
+def _energy_on(hand, targets, task, cfg, b: _Batch):
+    """``energy_on(index)``: the energy function of one optimizer run over the rows whose targets
+    are ``index (N,)`` (its own self-collision pair lists), returning ``(total (N,), extras)``."""
+
+    def energy_on(index):
         self_pairs = SelfPairList(hand, cfg.self_pair_skin_m) if cfg.self_pair_skin_m > 0 else None
         origin = task_origins(task, targets, index, cfg)
 
         def energy_fn(t, q, j):
             jj = hand.apply_couplings(j)
-            state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, tip_spheres,
+            state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=scenery)
-            terms = evaluate_state(state, cfg, task, directions, task_origin=origin)
+                                      scenery=b.scenery)
+            terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
             return terms.total, extras
         return energy_fn
+    return energy_on
 
+
+def _optimize(hand, targets, task, cfg, b: _Batch, callback, threads: int):
+    """``(x, extras, initial)``: the optimized poses of the output grasps, their last energy terms
+    and the initial pose ``(B, 7 + J)`` each came from. With ``cfg.seeds_per_grasp`` S > 1 every
+    start runs ``seed_select_iter`` iterations, then the best of each grasp's S goes on
+    (`datagen.synth.select`)."""
+    energy_on = _energy_on(hand, targets, task, cfg, b)
     opt = GroupedDescent(finger_joint_groups(hand), (cfg.step_translation_m, cfg.step_rotation_rad, cfg.step_joint_rad),
                          momentum=cfg.momentum, step_decay=cfg.step_decay, decay_every=cfg.decay_every,
                          project=hand.apply_couplings)
-    x = PoseVariables(root[:, :3].clone(), root[:, 3:].clone(), joints.clone())
-    first, K, run_index = 0, 1, object_index
-    if S > 1:  # multi-start: every seed runs the first iterations, the best seeds of each grasp go on
-        select = min(cfg.seed_select_iter, cfg.iters)
-        rounds = [(cfg.seed_halving_iter, S // 2)] if 0 < cfg.seed_halving_iter < select and S >= 4 else []
-        K, run_index = S, seed_index
-        for until, kept in rounds + [(select, min(cfg.seeds_kept, S))]:
-            x, e, extras = _run_split(opt, energy_on, x, run_index, targets, until - first, callback, first, threads)
-            keep = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                                         tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K, kept)
-            x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
-            root, joints, e = root[keep], joints[keep], e[keep]
-            extras = {k: v[keep] for k, v in extras.items()}
-            first, K, run_index = until, kept, object_index.repeat_interleave(kept)
+    x = PoseVariables(b.root[:, :3].clone(), b.root[:, 3:].clone(), b.joints.clone())
+    root, joints, first = b.root, b.joints, 0
+    S = cfg.seeds_per_grasp
+    if S > 1:  # multi-start: every seed runs the first iterations, the best of each grasp goes on
+        first = min(cfg.seed_select_iter, cfg.iters)
+        x, e, extras = _run_split(opt, energy_on, x, b.seed_index, targets, first, callback, 0, threads)
+        scores = seed_scores(hand, targets, b.seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
+                             b.tip_spheres, task, cfg, task_origins(task, targets, b.seed_index, cfg))
+        keep = top_seeds(scores, S)
+        x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
+        root, joints = root[keep], joints[keep]
+        extras = {k: v[keep] for k, v in extras.items()}
     if cfg.iters > first:
-        x, e, extras = _run_split(opt, energy_on, x, run_index, targets, cfg.iters - first, callback, first, threads)
-    if K > 1:  # the kept seeds ran to the end: the best of them by the same score
-        best = top_seeds(seed_scores(hand, targets, run_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                                     tip_spheres, task, cfg, task_origins(task, targets, run_index, cfg)), K)
-        x = PoseVariables(x.translation[best], x.quaternion[best], x.joints[best])
-        root, joints = root[best], joints[best]
-        extras = {k: v[best] for k, v in extras.items()}
-    t_opt = time.perf_counter() - t0
+        x, _, extras = _run_split(opt, energy_on, x, b.object_index, targets, cfg.iters - first, callback, first,
+                                  threads)
+    return x, extras, torch.cat([root, joints], -1)
 
+
+def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
+    """``(grasp, pregrasp, squeeze, state)`` at the optimized poses: the squeeze presses the task
+    fingertips with balanced grip forces (`datagen.synth.squeeze.force_squeeze`), the pregrasp is
+    its mirror image pulled back where it would sink the hand deeper than the grasp."""
+    idx = b.object_index
     with torch.no_grad():
-        grasp_j = hand.apply_couplings(x.joints)
-        root_f = x.root_pose()
-        state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
-                                  sphere_margin=cfg.sphere_margin_m, scenery=scenery)
-        if cfg.touch_real_gaps:  # the real fingertips onto the surface together (touch.py)
-            tip_index = torch.as_tensor(finger_index, dtype=torch.long, device=dev)
-            grasp_j, _ = touch_grasp(hand, targets, object_index, root_f, grasp_j, tip_index, tip_spheres,
-                                     state.contact_normals, finger_joint_mask(hand))
-            state = hand_object_state(hand, targets, object_index, root_f, grasp_j, tip_spheres,
-                                      sphere_margin=cfg.sphere_margin_m, scenery=scenery)
-        links = (link_contacts(hand, targets, object_index, root_f, grasp_j, cfg.seed_contact_gap_m)
-                 if cfg.squeeze_mode == "hand" else None)
-        pre_j, sq_j = pregrasp_and_squeeze(hand, cfg, root_f, grasp_j, tip_spheres, state.contact_points,
-                                           state.contact_normals, finger_joint_mask(hand), links,
-                                           mount=_mount(task, targets, object_index) if cfg.squeeze_mount else None)
+        grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
+        state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
+                                  sphere_margin=cfg.sphere_margin_m, scenery=b.scenery)
+        pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
+                                    cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
+                                    finger_joint_mask(hand), mount=_mount(task, targets, idx))
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
-            return hand_object_state(hand, targets, object_index, root_f, j, tip_spheres,
-                                     self_collision=False, scenery=scenery).max_penetration
+            return hand_object_state(hand, targets, idx, root_f, j, b.tip_spheres, self_collision=False,
+                                     scenery=b.scenery).max_penetration
 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
-    eps = epsilon_metric(state.contact_points.double(), state.contact_normals.double(), cfg.mu,
-                         normalize=cfg.normalize, contact_model=cfg.contact_model,
-                         torsional_mu=cfg.torsional_mu).to(dt) if len(finger_index) > 1 \
-        else torch.zeros(len(object_index), dtype=dt, device=dev)
-    energies = {k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")}
+    cat = lambda j: torch.cat([root_f, j], -1)  # noqa: E731
+    return cat(grasp_j), cat(pre_j), cat(sq_j), state
+
+
+def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
+               generator: torch.Generator | None = None, callback=None, threads: int | None = None) -> SynthesisResult:
+    """Optimize ``num_per_object`` poses on each target; see the module docstring. ``cfg`` is the
+    resolved config of ``task`` (`datagen.pipeline.resolve(...).synth`; one lacking the task's
+    ``synth:`` block is refused). ``threads`` (default: torch's intra-op thread count): on the
+    CPU, a large batch (the seeds' first iterations) runs in up to that many parts at once
+    (`_run_split`; the poses do not depend on it)."""
+    import time
+
+    t0 = time.perf_counter()
+    cfg.check_task(task)
+    cfg = cfg.for_hand(hand)
+    threads = torch.get_num_threads() if threads is None else int(threads)
+    task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
+    b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed))
+    x, extras, initial = _optimize(hand, targets, task, cfg, b, callback, threads)
+    t_opt = time.perf_counter() - t0
+    grasp, pregrasp, squeeze, state = _finish(hand, targets, task, cfg, b, x)
+    dt = hand.dtype
+    eps = (cfg.contact.epsilon(state.contact_points.double(), state.contact_normals.double()).to(dt)
+           if len(b.finger_index) > 1 else torch.zeros(len(b.object_index), dtype=dt, device=hand.device))
     return SynthesisResult(
-        object_index=object_index,
-        grasp=torch.cat([root_f, grasp_j], -1), pregrasp=torch.cat([root_f, pre_j], -1),
-        squeeze=torch.cat([root_f, sq_j], -1), initial=torch.cat([root, joints], -1),
+        object_index=b.object_index, grasp=grasp, pregrasp=pregrasp, squeeze=squeeze, initial=initial,
         contact_points=state.contact_points, contact_normals=state.contact_normals,
-        tip_distance=state.tip_distance, energies=energies, max_penetration=state.max_penetration,
-        epsilon=eps.detach(), fingers=[hand.fingertip_names[i] for i in finger_index], seed=cfg.seed,
+        tip_distance=state.tip_distance, max_penetration=state.max_penetration, epsilon=eps.detach(),
+        energies={k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")},
+        fingers=[hand.fingertip_names[i] for i in b.finger_index], seed=cfg.seed,
         timings={"optimize_s": t_opt, "total_s": time.perf_counter() - t0},
     )

@@ -4,7 +4,7 @@
     spec.w_t, spec.gamma_deg, spec.fingers  # the task wrench space and contact fingertips (synthesis)
     spec.init                               # InitConfig: the initial hand poses (datagen.synth.init)
     spec.for_hand("allegro")                # the task with its `hands:` entry for that hand applied
-    SynthConfig.from_dict(spec.synth_settings({...}))  # its `synth:` block, the caller's settings on top
+    spec.synth                              # its `synth:` block (a layer of datagen.pipeline.resolve)
     task_test_from_spec(spec)               # TaskTest: the physical test (datagen.eval), None: six directions
     task_scenery(spec)                      # static boxes round a mounted object (door, housing, cabinet)
     task_targets(spec, targets)             # the objects it runs on

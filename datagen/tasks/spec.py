@@ -13,8 +13,9 @@ hint) and ``fingers`` (e.g. without the little finger). `TaskSpec.for_hand` appl
     hands:
       allegro: {init: {target_m: [0.0, 0.06, 0.02], curl: 0.4}}
 
-A ``synth`` block holds the `SynthConfig` settings the task's synthesis starts from (its
-callers put their own on top: `TaskSpec.synth_settings`), e.g. exact contacts and multi-start.
+A ``synth`` block holds the `SynthConfig` settings the task's synthesis starts from, e.g. exact
+contacts and multi-start: one layer of the recipe (`datagen.pipeline.resolve` puts it over the
+preset and puts the user's settings on top).
 """
 
 from __future__ import annotations
@@ -99,7 +100,8 @@ class TaskSpec(Config):
     eval: str | dict = "six_direction"  #: "six_direction" or the task test mapping (see datagen.tasks.evaluation)
     hands: Mapping[str, HandOverride] = field(default_factory=dict)  #: per-hand init / fingers (see for_hand)
     #: SynthConfig fields this task's synthesis starts from (e.g. ``exact_contacts``,
-    #: ``seeds_per_grasp``, ``weights: {task: ...}``); a caller's own settings go on top (`synth_settings`)
+    #: ``seeds_per_grasp``, ``weights: {task: ...}``): a layer of the recipe, over the preset and
+    #: under the user's settings (`datagen.pipeline.resolve`)
     synth: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
@@ -115,18 +117,6 @@ class TaskSpec(Config):
         object.__setattr__(self, "hands", hands)
         for k in hands:
             self.for_hand(k)  # every hand's init must be a valid InitConfig
-
-    def synth_settings(self, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """A `SynthConfig` mapping: this task's ``synth`` block with ``overrides`` on top (the
-        ``weights`` mapping merged key by key). Build it with ``SynthConfig.from_dict``, which
-        names an unknown or bad field."""
-        out = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in dict(self.synth).items()}
-        for k, v in dict(overrides or {}).items():
-            if k == "weights" and isinstance(v, Mapping) and isinstance(out.get(k), dict):
-                out[k] = {**out[k], **dict(v)}
-            else:
-                out[k] = dict(v) if isinstance(v, Mapping) else v
-        return out
 
     def for_hand(self, hand_name: str) -> "TaskSpec":
         """This task as hand ``hand_name`` runs it: its ``hands`` entry's init fields and fingers

@@ -2,9 +2,8 @@
 
 Checked: one row per object x scale x grasp with what the caller says of each object; a broken
 object becomes a failure record naming it while the others keep their rows; a task bound to
-another object yields nothing; rescaled targets match targets built at their own scale; and the
-two front ends agree: ``datagen synth`` then ``datagen eval`` give exactly `run_batch`'s rows for
-the same object, configs and seed.
+another object yields nothing; rescaled targets match targets built at their own scale; evaluation in a pool gives one
+process's rows. (The entry points' agreement: tests/pipeline/test_recipe.py.)
 """
 
 from __future__ import annotations
@@ -12,20 +11,16 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import pyarrow.parquet as pq
 import pytest
 import torch
 import trimesh
-import yaml
 
-from datagen.cli import main
 from datagen.eval import EvalConfig
 from datagen.objects.config import ProcessConfig
 from datagen.objects.process import process_object
 from datagen.objects.sources import resolve
-from datagen.pipeline import BatchObject, build_targets, run_batch
+from datagen.pipeline import BatchObject, build_targets, resolve as resolve_recipe, run_batch
 from datagen.synth import GraspTarget, SynthConfig
-from datagen.synth.config import FORCE_CLOSURE_SEEDS
 from schemas import arrow_schema
 
 pytestmark = pytest.mark.mujoco
@@ -67,8 +62,10 @@ def test_rows_failures_and_task_pairing(world, tmp_path):
     box = BatchObject(objs["box.obj"], (0.07, 0.09), object_id="box-1", object_path=entry.name, split="test")
     broken = BatchObject(dataclasses.replace(objs["ball.obj"], entry=tmp_path / "gone"), (0.08,), object_id="ball-1")
     seen = []
-    out = run_batch([box, broken], hand, ["force_closure", "turn_knob2"], SynthConfig(iters=10, num_directions=16),
-                    EvalConfig.from_dict(TINY_EVAL), grasps_per_object=2, seed=5, grid_resolution=16, cache=cache,
+    layer = {"synth": {"iters": 10, "num_directions": 16, "seeds_per_grasp": 1}, "eval": TINY_EVAL,
+             "grid_resolution": 16}
+    recipes = [resolve_recipe("shadow", t, config=layer) for t in ("force_closure", "turn_knob2")]
+    out = run_batch([box, broken], hand, recipes, grasps_per_object=2, seed=5, cache=cache,
                     base=entry.parent, progress=lambda d, t: seen.append((d, t)))
     assert out.rows.schema.equals(arrow_schema("evaluated", nq=7 + hand.num_joints).remove_metadata())
     rows = out.rows.to_pylist()
@@ -95,46 +92,6 @@ def test_rescaled_targets_match_targets_built_at_their_scale(world):
     assert t9.sdf is t7.sdf  # the normalized-unit SDF is built once per object
     with pytest.raises(ValueError, match="boom.obj"):
         build_targets([BatchObject(dataclasses.replace(objs["box.obj"], object_id="boom.obj", entry=None), (0.08,))])
-
-
-@pytest.mark.slow
-def test_synth_then_eval_commands_give_the_batch_rows(world, tmp_path):
-    objs, cache, hand = world
-    box = objs["box.obj"]
-    (tmp_path / "eval.yaml").write_text(yaml.safe_dump(TINY_EVAL))
-    synth_args = ["--num", "2", "--iters", "150", "--seed", "3", "--scale", "0.08"]
-    assert main(["synth", "--object", str(box.entry), "--cache", cache, "--out", str(tmp_path / "g.parquet"),
-                 *synth_args]) == 0
-    assert main(["eval", str(tmp_path / "g.parquet"), "--config", str(tmp_path / "eval.yaml"),
-                 "--out", str(tmp_path / "e.parquet")]) == 0
-    cli_rows = pq.read_table(tmp_path / "e.parquet").to_pylist()
-    out = run_batch([BatchObject(box, (0.08,))], hand, ["force_closure"],
-                    SynthConfig(iters=150, seeds_per_grasp=FORCE_CLOSURE_SEEDS), EvalConfig.from_dict(TINY_EVAL),
-                    grasps_per_object=2, seed=3, cache=cache)
-    assert out.failures == []
-    assert len(cli_rows) == 2 and _clean(out.rows.to_pylist()) == _clean(cli_rows)
-
-
-def test_a_tasks_synth_block_lies_under_the_run_config():
-    """SynthConfig.for_task: the task's `synth:` block replaces the defaults; a field the run sets
-    away from its default wins (a job's synth mapping), weights merged key by key; a task without
-    a block leaves the config as it is."""
-    from datagen.synth.config import EnergyWeights
-    from datagen.tasks import load_task
-
-    plate = load_task("lift_plate")
-    assert dict(plate.synth) == {"exact_contacts": True, "seeds_per_grasp": 16, "weights": {"distance": 1e5}}
-    merged = SynthConfig().for_task(plate)
-    assert merged.exact_contacts is True and merged.seeds_per_grasp == 16 and merged.iters == SynthConfig().iters
-    assert merged.weights == EnergyWeights(distance=1e5)
-    mine = SynthConfig(seeds_per_grasp=2, iters=40, weights=EnergyWeights(task=0.0)).for_task(plate)
-    assert (mine.seeds_per_grasp, mine.iters, mine.exact_contacts) == (2, 40, True)
-    # key by key: the run's task weight, the task's distance weight (the run left it at its default)
-    assert mine.weights.task == 0.0 and mine.weights.distance == 1e5
-    assert mine.weights.penetration == EnergyWeights().penetration
-    fc = load_task("force_closure")
-    cfg = SynthConfig(iters=7)
-    assert not fc.synth and cfg.for_task(fc) is cfg
 
 
 def test_evaluation_in_a_pool_gives_the_same_rows_and_finds_a_failing_target(world, tmp_path):

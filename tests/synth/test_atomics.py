@@ -75,7 +75,10 @@ def test_synthesis_makes_no_atomics_summing_call(hand_name, task_name):
         pytest.skip(f"{hand_name} assets not installed (`make hands`)")
     hand = load_hand(hand_name)
     targets = [_target(0.07, "a"), _target(0.09, "b")]  # two targets: the stacked grid queries
-    cfg = SynthConfig(iters=40, seeds_per_grasp=2, seed_select_iter=20, num_directions=16, seed=1)
+    from datagen.pipeline import resolve
+
+    cfg = resolve(hand_name, task_name, preset="paper", flags={"synth": dict(
+        iters=40, seeds_per_grasp=2, seed_select_iter=20, num_directions=16, seed=1)}).synth  # the task's block too
     rec = AtomicsRecorder()
     with rec:  # the mode is thread-local: 8 poses stay on this thread (no parts)
         res = synthesize(hand, targets, load_task(task_name), cfg, 4)

@@ -16,6 +16,7 @@ from datagen.hands import load_hand
 from datagen.objects import task_objects as T
 from datagen.objects.process import process_object
 from datagen.objects.sources import resolve
+from datagen.pipeline import resolve as resolve_recipe
 from datagen.synth.squeeze import joint_mobility
 from datagen.synth.synthesize import _mount
 from datagen.tasks import load_task
@@ -76,7 +77,7 @@ def test_centre_of_mass_is_mujocos_and_task_origins_follow_the_config(tmp_path):
 
     idx = torch.tensor([0, 0, 0])
     bag = load_task("lift_handbag")
-    on = SynthConfig.from_dict(bag.synth_settings({}))
+    on = resolve_recipe("shadow", "lift_handbag", preset="paper").synth
     assert on.task_wrench_at_com
     origin = task_origins(bag, [target], idx, on)
     np.testing.assert_allclose(origin.numpy(), np.tile(target.centre_of_mass, (3, 1)))

@@ -10,6 +10,7 @@ import trimesh
 
 from datagen.hands import load_hand
 from datagen.objects import task_objects as T
+from datagen.pipeline import resolve
 from datagen.synth import GraspTarget, SynthConfig, synthesize
 from datagen.synth.energies import contact_sphere_index, hand_object_state
 from datagen.synth.init import SCENERY_CLEARANCE_M, initial_poses
@@ -124,7 +125,7 @@ def test_short_synthesis_keeps_the_hand_out_of_the_door_by_mujoco(shadow, lever,
 
     task = load_task("turn_handle")
     generic = task.__class__(**{**task.__dict__, "init": InitConfig()})
-    cfg = SynthConfig.from_dict(generic.synth_settings({"iters": 150, "seeds_per_grasp": 2, "seed": 0}))
+    cfg = resolve("shadow", "turn_handle", preset="paper", flags={"synth": {"iters": 150, "seeds_per_grasp": 2, "seed": 0}}).synth
     res = synthesize(shadow, [lever], generic, cfg, 6)
     part = tmp_path / "lever.obj"
     obj = T.build("lever_handle")

@@ -1,24 +1,28 @@
-"""`make bench-tasks` rewrites tasks.md from its records: sections whose records are gone stay."""
+"""`make bench-tasks` rewrites tasks.md from its records: the latest complete version per hand
+and initialisation, newest first; the hand-written notes stay."""
 
-from benchmarks.bench_tasks import write_report
+from benchmarks.bench_tasks import TASKS, latest_complete, write_report
 
 
-def test_rewrite_keeps_sections_without_records_and_the_notes(tmp_path):
+def test_rewrite_replaces_the_results_and_keeps_the_notes(tmp_path):
     out = tmp_path / "tasks.md"
     out.write_text("# Title\n\nMachine: old\n\n# Results at code version aaa\n\nold A\n\n"
-                   "# Results at code version bbb\n\nold B\n\n## Notes (hand-written, kept)\n\n- a note\n\n"
-                   "tasks-generic: full=1 baseline=0\n")
-    rendered = "# Title\n\nMachine: new\n\n# Results at code version bbb\n\nnew B\n\n# Results at code version ccc\n\nnew C\n"
+                   "## Notes (hand-written, kept)\n\n- a note\n\ntasks-generic: full=1 baseline=0\n")
+    rendered = "# Title\n\nMachine: new\n\n# Results at code version ccc\n\nnew C\n"
     write_report(out, rendered, "tasks-generic: full=2 baseline=1")
     text = out.read_text()
-    assert "Machine: new" in text and "Machine: old" not in text
-    assert "old A" in text and "old B" not in text  # a version with records is rendered afresh
-    order = [text.index(s) for s in ("# Results at code version aaa", "# Results at code version bbb",
-                                      "# Results at code version ccc", "## Notes", "- a note")]
-    assert order == sorted(order)
-    assert text.count("# Results at code version") == 3
+    assert "Machine: new" in text and "old A" not in text and "new C" in text  # history is git's
+    assert text.index("new C") < text.index("## Notes") < text.index("- a note")
     assert text.rstrip("\n").splitlines()[-1] == "tasks-generic: full=2 baseline=1"
-    assert "full=1 baseline=0" not in text
+
+
+def test_the_latest_version_covering_every_task_is_shown():
+    def rec(v, task, hand="shadow", init="task", variant="full"):
+        return {"code_version": v, "task": task, "hand": hand, "init": init, "variant": variant}
+    recs = [rec("a", t) for t in TASKS] + [rec("b", TASKS[0])] + [rec("b", t, init="generic") for t in TASKS[:2]]
+    assert latest_complete(recs, ["a", "b"]) == {("shadow", "task"): "a", ("shadow", "generic"): "b"}
+    recs += [rec("c", t) for t in TASKS]
+    assert latest_complete(recs, ["a", "b", "c"])[("shadow", "task")] == "c"
 
 
 def test_rewrite_without_generic_records_keeps_the_headline(tmp_path):

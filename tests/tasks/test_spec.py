@@ -73,16 +73,16 @@ def test_bad_hands_block_names_the_field(tmp_path, block, field):
 
 
 def test_synth_block_is_the_start_and_callers_settings_go_on_top(tmp_path):
-    from datagen.synth import SynthConfig
+    from datagen.pipeline import resolve
 
     p = tmp_path / "s.yaml"
     p.write_text("name: s\nsynth: {exact_contacts: true, seeds_per_grasp: 8, weights: {task: 3.0}}\n")
     spec = load_task(p)
-    cfg = SynthConfig.from_dict(spec.synth_settings({"weights": {"distance": 2.0e4}, "iters": 7}))
-    assert (cfg.exact_contacts, cfg.seeds_per_grasp, cfg.iters) == (True, 8, 7)
+    cfg = resolve("shadow", p, flags={"synth": {"weights": {"distance": 2.0e4}, "iters": 7}}).synth
+    assert (cfg.exact_contacts, cfg.seeds_per_grasp, cfg.iters, cfg.task) == (True, 8, 7, "s")
     assert (cfg.weights.task, cfg.weights.distance) == (3.0, 2.0e4)  # weights merged key by key
-    assert SynthConfig.from_dict(spec.synth_settings({"weights": {"task": 0.0}})).weights.task == 0.0
+    assert resolve("shadow", p, config={"synth": {"weights": {"task": 0.0}}}).synth.weights.task == 0.0
     assert spec.for_hand("allegro").synth == spec.synth
     p.write_text("name: s\nsynth: {seeds: 8}\n")
-    with pytest.raises(ConfigError, match="seeds"):
-        SynthConfig.from_dict(load_task(p).synth_settings())
+    with pytest.raises(ConfigError, match=r"task 's'.*seeds"):
+        resolve("shadow", p)

@@ -31,7 +31,8 @@ def cache_dir(tmp_path_factory) -> str:
 
 def tiny_config(source: str, **kw) -> JobConfig:
     base = dict(source=source, count=3, scales=(0.08,), grasps_per_object=2, objects_per_shard=1,
-                grid_resolution=16, synth={"iters": 20, "num_directions": 16}, eval=dict(TINY_EVAL),
+                grid_resolution=16, synth={"iters": 20, "num_directions": 16, "seeds_per_grasp": 1},
+                eval=dict(TINY_EVAL),
                 object_timeout_s=120.0)
     base.update(kw)
     return JobConfig(**base)

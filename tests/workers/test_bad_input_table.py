@@ -1,4 +1,4 @@
-"""The README's bad-input table ("## Bad input") is true: every row's input gives what the row
+"""The bad-input tables of docs/bad-input.md are true: every row's input gives what the row
 says. Each row's first cell names a scenario below; the set of rows and scenarios must match.
 
 A command row says ``exit N`` and quotes the message; an object row says ``failure row
@@ -21,13 +21,12 @@ from workers.run import merge_failures, prepare_manifest
 from .conftest import tiny_config
 from .test_shard import run_all
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "bad-input.md"
 
 
 def table_rows() -> dict[str, str]:
-    """input cell -> what-you-see cell, from the README's bad-input tables."""
-    text = README.read_text()
-    section = text.split("\n## Bad input\n", 1)[1].split("\n## ", 1)[0]
+    """input cell -> what-you-see cell, from the page's bad-input tables."""
+    section = PAGE.read_text()
     rows = {}
     for line in section.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else []
@@ -153,7 +152,7 @@ COMMANDS = {
     "Ctrl-C during `prepare`": lambda t, c, m: _interrupted_command(
         t, c, m, ("datagen.objects.prepare", "prepare"), ["prepare", "--manifest", str(t / "m.jsonl")]),
     "Ctrl-C during `synth`": lambda t, c, m: _interrupted_command(
-        t, c, m, ("datagen.pipeline.commands", "load_object"),
+        t, c, m, ("datagen.pipeline.api", "load_object"),
         ["synth", "--object", str(_box(t / "box.obj")), "--out", str(t / "g.parquet")]),
     "Ctrl-C during `eval`": lambda t, c, m: _interrupted_command(
         t, c, m, ("datagen.eval.table", "read_grasps"), ["eval", str(t / "g.parquet"), "--out", str(t / "e.parquet")]),

@@ -52,7 +52,7 @@ def test_vanished_or_changed_file_is_a_failure_without_rows(tmp_path, cache_dir)
     entries = prepare_manifest(job, cfg)
     from datagen.objects.isolate import process_isolated
 
-    pcfg = cfg.build_configs()[0]
+    pcfg = cfg.recipes()[0].process
     for e in entries:  # both are in the cache, under the manifest's hashes, as after an earlier job
         assert process_isolated(e, pcfg, cache_dir, 120).ok
     (root / "gone.obj").unlink()

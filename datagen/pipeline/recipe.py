@@ -1,0 +1,128 @@
+"""One resolved configuration per hand and task (a `Recipe`), built by one resolver.
+
+Every entry point -- the library call (`datagen.synthesize`), ``datagen synth``, ``datagen
+run`` and its shards, the benchmarks -- gets its settings from `resolve`, which stacks these
+layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``process``,
+``grid_resolution``), in this order::
+
+    library defaults   the config dataclasses' own (SynthConfig, EvalConfig, ProcessConfig)
+    preset             PRESETS[name]: "dataset" (the default: what a job runs) or "paper"
+    task               the task YAML's ``synth:`` block
+    config             the user's config file or mapping
+    flags              explicit command-line flags (or keyword arguments)
+
+A key a layer lacks is unset, and the layer below decides; a key a layer sets wins, even when
+it equals a default (``--seeds 1`` is one seed on every task). Nested mappings (``weights``,
+``contact``) merge key by key. The result is a frozen `Recipe`: what a job records in job.json
+and hashes, and what ``datagen synth`` writes into its table's metadata.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from datagen.config import Config
+from datagen.errors import ConfigError
+from datagen.eval.config import EvalConfig
+from datagen.objects.config import ProcessConfig
+from datagen.synth.config import SynthConfig
+
+__all__ = ["DEFAULT_PRESET", "PRESETS", "RECIPE_KEYS", "Recipe", "merge_layers", "resolve"]
+
+#: the parts of a configuration layer (a config file may hold other keys: a job's source, count, ...)
+RECIPE_KEYS = ("synth", "eval", "process", "grid_resolution")
+
+# A cheap CoACD setting: threshold 0.1 and preprocess resolution 30 are 2-3x faster than the
+# objects package's defaults (0.05 / 50) and give coarser but adequate pieces for the hold test
+# (NOTES §5, benchmarks/results/objects.md).
+_FAST_PROCESS = {"coacd_threshold": 0.1, "coacd_preprocess_resolution": 30, "coacd_mcts_iterations": 60,
+                 "coacd_mcts_nodes": 10}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # What a dataset job runs: the best of 16 starts per grasp (by the whole hand's epsilon after
+    # 120 iterations) raised six-direction success on the real-object set from 38% to 73% (Shadow,
+    # 8 starts) and the 0.08 m probe from 68% to 82% (16; benchmarks/results/quality.md); 300
+    # iterations; a 48^3 SDF grid (~10 s per object on one core) and the fast CoACD setting.
+    "dataset": {"synth": {"iters": 300, "seeds_per_grasp": 16}, "process": dict(_FAST_PROCESS),
+                "grid_resolution": 48},
+    # The paper's synthesis: one start per pose, 500 iterations (the library defaults), a 64^3
+    # grid and the objects package's CoACD defaults (threshold 0.05).
+    "paper": {"grid_resolution": 64},
+}
+DEFAULT_PRESET = "dataset"
+
+
+@dataclass(frozen=True)
+class Recipe(Config):
+    """Everything that decides the grasps of one hand and task on an object, resolved."""
+
+    hand: str = "shadow"  #: built-in hand name or hand spec YAML path
+    task: str = "force_closure"  #: built-in task name or task YAML path
+    preset: str = DEFAULT_PRESET  #: the preset it was resolved from (a key of PRESETS)
+    synth: SynthConfig = field(default_factory=SynthConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    process: ProcessConfig = field(default_factory=ProcessConfig)
+    grid_resolution: int = 64  #: synthesis SDF grid nodes per axis (built once per object)
+
+    def __post_init__(self):
+        if self.preset not in PRESETS:
+            raise ConfigError(f"Recipe.preset: unknown preset {self.preset!r}", f"choose from {sorted(PRESETS)}")
+        if not 8 <= self.grid_resolution <= 256:
+            raise ConfigError(f"Recipe.grid_resolution must be in 8..256 (nodes per axis), got {self.grid_resolution}")
+
+    def load_task(self):
+        """The task's `datagen.tasks.TaskSpec`."""
+        from datagen.tasks import load_task
+
+        return load_task(self.task)
+
+
+def merge_layers(*layers: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The layers merged in order, later keys winning; nested mappings merge key by key."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for k, v in dict(layer or {}).items():
+            if isinstance(v, Mapping) and isinstance(out.get(k), dict):
+                out[k] = merge_layers(out[k], v)
+            else:
+                out[k] = merge_layers(v) if isinstance(v, Mapping) else v
+    return out
+
+
+def _layer(data: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
+    """A configuration layer: only the recipe's keys (and ``preset``), each part a mapping."""
+    data = dict(data or {})
+    for k in ("synth", "eval", "process"):
+        if k in data and data[k] is not None and not isinstance(data[k], Mapping):
+            raise ConfigError(f"{where}: {k} must be a mapping of fields, got {type(data[k]).__name__}")
+    if "squeeze_kp" in (data.get("synth") or {}):
+        raise ConfigError(f"{where}: synth.squeeze_kp is the evaluation's actuator_kp",
+                          "set eval.actuator_kp instead (the squeeze is computed for it)")
+    return {k: data[k] for k in (*RECIPE_KEYS, "preset") if data.get(k) is not None}
+
+
+def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset: str | None = None,
+            config: Mapping[str, Any] | None = None, flags: Mapping[str, Any] | None = None,
+            where: str = "config") -> Recipe:
+    """The `Recipe` of ``hand`` and ``task`` (names or YAML paths): library defaults, then the
+    preset (``preset`` argument, else the flags', else the config's, else `DEFAULT_PRESET`), the
+    task's ``synth:`` block, ``config`` (the user's settings: a mapping with any of `RECIPE_KEYS`;
+    other keys are ignored) and ``flags`` (the same shape). ``where`` names ``config`` in errors.
+    Raises `ConfigError` naming the field for an unknown preset, key or value."""
+    from datagen.tasks import load_task
+
+    user, explicit = _layer(config, where), _layer(flags, "flags")
+    name = preset or explicit.pop("preset", None) or user.pop("preset", None) or DEFAULT_PRESET
+    user.pop("preset", None)
+    if name not in PRESETS:
+        raise ConfigError(f"preset {name!r} is not known", f"choose from {sorted(PRESETS)}")
+    spec = load_task(task)
+    merged = merge_layers(PRESETS[name], {"synth": dict(spec.synth)}, user, explicit)
+    ev = EvalConfig.from_dict(merged.get("eval"), where=f"{where}: eval")
+    synth = SynthConfig.from_dict({**merged.get("synth", {}), "task": spec.name, "squeeze_kp": ev.actuator_kp},
+                                  where=f"{where}: synth (task {spec.name!r})")
+    process = ProcessConfig.from_dict(merged.get("process"), where=f"{where}: process")
+    return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
+                  grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)))
