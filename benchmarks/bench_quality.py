@@ -62,7 +62,7 @@ def failure_classes(rows: dict) -> collections.Counter:
     for ok, reason, eps in zip(rows["success"], rows["reason"], rows["synth_epsilon"]):
         if ok:
             continue
-        if reason in ("penetration", "grasp_penetration", "self_penetration"):
+        if reason == "penetration":
             out["rejected: " + reason] += 1
         elif reason == "no_contact":
             out["no contact at the grasp"] += 1

@@ -114,10 +114,6 @@ class EvalConfig(Config):
     epsilon_mu: float | None = None                # None: friction[0]
     epsilon_samples: int = 1024                    # see datagen.wrench.EpsilonSearch
     epsilon_iters: int = 100
-    # --- optional filters (None: off; the public protocol has none) ---
-    filter_max_penetration_m: float | None = None  # hand-object depth at the grasp pose
-    filter_max_self_penetration_m: float | None = None
-    filter_min_epsilon: float | None = None
     # --- tasks ---
     hold_tasks: tuple[str, ...] = ("force_closure",)
     tasks: Mapping[str, TaskTest] = field(default_factory=lambda: dict(DEFAULT_TASKS))

@@ -7,8 +7,7 @@ Order of decisions (the first that applies is the reason):
    ``max_pregrasp_penetration_m`` (the public protocol's rejection before simulating);
 3. ``no_contact``: fewer than ``min_touching_links`` hand links within ``touch_distance_m`` of
    the object at the grasp pose (so the squeeze alone cannot make a grasp);
-4. optional filters at the grasp pose: ``grasp_penetration``, ``self_penetration``, ``low_epsilon``;
-5. the simulated test: ``unstable`` (the simulation diverged), ``slipped_<dir>`` (the first
+4. the simulated test: ``unstable`` (the simulation diverged), ``slipped_<dir>`` (the first
    direction, in ``+x -x +y -y +z -z`` order, failing at the earliest failing check) or
    ``slipped_task`` for a task test; else ``ok``. The object's motion is measured from its
    initial pose (the public protocol), or for a task test with ``measure_from: closed`` from its
@@ -64,9 +63,6 @@ class Reason(str, enum.Enum):
     INVALID_GRASP = "invalid_grasp"
     PENETRATION = "penetration"
     NO_CONTACT = "no_contact"
-    GRASP_PENETRATION = "grasp_penetration"
-    SELF_PENETRATION = "self_penetration"
-    LOW_EPSILON = "low_epsilon"
     UNSTABLE = "unstable"
     SLIPPED_TASK = "slipped_task"
 
@@ -109,7 +105,7 @@ class TaskMargin:
     ``result``: the verdict at the test's own magnitude (identical to `Evaluator.evaluate`).
     ``held_multiple``: the largest multiple of the grid held, found by bisection: above 1 if the
     grasp holds at 1, below it otherwise; 0 when it holds none (or was rejected before
-    simulating: penetration, no contact, filters, invalid). Assumes that holding a disturbance
+    simulating: penetration, no contact, invalid). Assumes that holding a disturbance
     implies holding a smaller one of the same direction (only the bisection's own tests check
     it), so the grid's neighbour above ``held_multiple`` was tested and failed unless
     ``held_multiple`` ends the grid. ``held_wrench``: ``held_multiple`` times the test's
@@ -231,8 +227,48 @@ class Evaluator:
         return self._run(pieces, poses, task, w_t, grid)
 
     def _run(self, pieces: ObjectPieces, poses: np.ndarray, task: str, w_t, grid) -> TaskMargin:
+        """The verdict (and with ``grid`` the held multiple) of one grasp: the shared steps
+        (checks at the static poses, closing the hand, the hold, the reason) around the test's
+        disturbances, six directions (`six_direction_wrenches`) or the task's (`task_wrenches`)."""
         cfg = self.cfg
-        test = cfg.task_test(task)  # raises EvalError for an unknown task
+        test, poses = self._grasp_input(poses, task, w_t)
+        scene, datas = self.scene(pieces, test)
+        verdict = _Verdict(self.hand, "six_direction" if test is None else task, len(DIRECTIONS) if test is None else 1)
+        wrenches = (six_direction_wrenches(cfg, scene.object_mass) if test is None
+                    else task_wrenches(test, cfg, scene.object_mass, pieces.scale))
+        magnitude = float(np.linalg.norm(wrenches[0, :3]) if np.any(wrenches[0, :3]) else np.linalg.norm(wrenches[0, 3:]))
+
+        def done(res: GraspResult, held: float = 0.0, tested: tuple = ()) -> TaskMargin:
+            return TaskMargin(res, held, held * magnitude, tested)
+
+        if not np.all(np.isfinite(poses)) or np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-9):
+            return done(verdict(Reason.INVALID_GRASP.value))
+        common, rejected = self._static_checks(scene, datas[-1], poses, test)
+        if rejected:
+            return done(verdict(rejected, **common))
+        closed, pos0, quat0, n0 = self._close(scene, datas[-2], poses, test)
+        if closed is None:
+            dirs = [DirectionResult(False, math.inf, math.inf, True)] * verdict.n_dir
+            return done(verdict(Reason.UNSTABLE.value, False, dirs, steps=n0, **common))
+        pool, hold_cfg = self._hold_pool(), self._hold_config(test)
+        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, pool)
+        steps = n0 + sum(int(round(d.time / cfg.timestep_s)) - n0 for d in datas[:len(wrenches)])
+        reason = _failure_reason(dirs, test)
+        res = verdict(reason or Reason.OK.value, reason is None, dirs, steps=steps, **common)
+        if grid is None:
+            return done(res)
+
+        def holds(k: float) -> bool:
+            return all(d.success for d in hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0,
+                                               hold_cfg, pool))
+
+        held, tested = _bisect(grid, res.success, holds)
+        return done(res, held, tested)
+
+    def _grasp_input(self, poses: np.ndarray, task: str, w_t) -> tuple[TaskTest | None, np.ndarray]:
+        """``(test, poses)``: the task's test (None: six directions; the row's ``w_t`` replacing
+        its own) and the poses as a (3, 7 + J) float array (`EvalError` for another shape)."""
+        test = self.cfg.task_test(task)  # raises EvalError for an unknown task
         if test is not None and w_t is not None:
             test = dataclasses.replace(test, w_t=tuple(float(x) for x in w_t))
         poses = np.asarray(poses, dtype=np.float64)
@@ -241,109 +277,100 @@ class Evaluator:
             raise EvalError(f"grasp of hand {self.hand.name!r}",
                             f"poses have shape {poses.shape}, expected (3, {width})",
                             "rows are [x y z qw qx qy qz] + joints in the hand MJCF's joint order")
-        scene, datas = self.scene(pieces, test)
-        n_dir = len(DIRECTIONS) if test is None else 1
-        name = "six_direction" if test is None else task
-        nan = (math.nan,) * n_dir
+        return test, poses
 
-        def result(reason: str, success: bool = False, dirs: list[DirectionResult] | None = None,
-                   pre: float = math.nan, met: StaticMetrics | None = None, eps: float = math.nan,
-                   steps: int = 0) -> GraspResult:
-            F = len(self.hand.fingertip_names)
-            return GraspResult(
-                success=success, reason=reason, test=name,
-                direction_success=tuple(d.success for d in dirs) if dirs else (None,) * n_dir,
-                direction_translation_m=tuple(d.translation_m for d in dirs) if dirs else nan,
-                direction_rotation_deg=tuple(d.rotation_deg for d in dirs) if dirs else nan,
-                pregrasp_penetration_m=pre,
-                penetration_m=met.penetration if met else math.nan,
-                self_penetration_m=met.self_penetration if met else math.nan,
-                min_distance_m=met.min_distance if met else math.nan,
-                finger_distance_m=tuple(float(x) for x in met.finger_distance) if met else (math.nan,) * F,
-                touching_links=met.touching_links if met else 0,
-                num_contacts=len(met.contact_points) if met else 0,
-                epsilon=eps, sim_steps=steps)
-
-        def done(res: GraspResult, held: float = 0.0, tested: tuple = ()) -> TaskMargin:
-            return TaskMargin(res, held, held * magnitude, tested)
-
-        if test is None:
-            magnitude = cfg.force_per_kg * scene.object_mass
-        else:
-            w = test.disturbance(scene.object_mass, pieces.scale, cfg.force_per_kg)
-            magnitude = float(np.linalg.norm(w[:3]) if np.any(w[:3]) else np.linalg.norm(w[3:]))
-
-        if not np.all(np.isfinite(poses)) or np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-9):
-            return done(result(Reason.INVALID_GRASP.value))
-        static = datas[-1]
-        pre = static_metrics(scene, static, poses[0], touch_distance=cfg.touch_distance_m,
+    def _static_checks(self, scene: Scene, data: mujoco.MjData, poses: np.ndarray,
+                       test: TaskTest | None) -> tuple[dict, str | None]:
+        """``(metrics, reason)``: the static metrics at the pregrasp and the grasp, and the reason
+        the grasp is rejected before simulating (None: it is simulated)."""
+        cfg = self.cfg
+        pre = static_metrics(scene, data, poses[0], touch_distance=cfg.touch_distance_m,
                              contact_distance=cfg.contact_distance_m, with_self=False).penetration
-        met = static_metrics(scene, static, poses[1], touch_distance=cfg.touch_distance_m,
+        met = static_metrics(scene, data, poses[1], touch_distance=cfg.touch_distance_m,
                              contact_distance=cfg.contact_distance_m)
-        eps = self.epsilon(met)
-        common = dict(pre=pre, met=met, eps=eps)
+        common = dict(pre=pre, met=met, eps=self.epsilon(met))
         if pre > cfg.max_pregrasp_penetration_m:
-            return done(result(Reason.PENETRATION.value, **common))
+            return common, Reason.PENETRATION.value
         min_links = cfg.min_touching_links if test is None or test.min_touching_links is None else test.min_touching_links
-        if met.touching_links < min_links:
-            return done(result(Reason.NO_CONTACT.value, **common))
-        if cfg.filter_max_penetration_m is not None and met.penetration > cfg.filter_max_penetration_m:
-            return done(result(Reason.GRASP_PENETRATION.value, **common))
-        if cfg.filter_max_self_penetration_m is not None and met.self_penetration > cfg.filter_max_self_penetration_m:
-            return done(result(Reason.SELF_PENETRATION.value, **common))
-        if cfg.filter_min_epsilon is not None and eps < cfg.filter_min_epsilon:
-            return done(result(Reason.LOW_EPSILON.value, **common))
+        return common, Reason.NO_CONTACT.value if met.touching_links < min_links else None
 
-        closed = datas[-2]
+    def _close(self, scene: Scene, closed: mujoco.MjData, poses: np.ndarray, test: TaskTest | None):
+        """``(closed, pos0, quat0, steps)``: the hand driven pregrasp -> grasp -> squeeze in
+        ``closed``, the object pose the test measures from (its start, or the closed hand's for
+        a task measured from there) and the steps taken; ``closed`` None when the closing blew up."""
         initial_state(scene, closed, poses[0])
-        pos0 = closed.xpos[scene.object_body].copy()
-        quat0 = closed.xquat[scene.object_body].copy()
-        close_hand(scene, closed, poses, cfg)
+        pos0, quat0 = closed.xpos[scene.object_body].copy(), closed.xquat[scene.object_body].copy()
+        close_hand(scene, closed, poses, self.cfg)
         if test is not None and test.measure_from == "closed":
             # from where the closed hand holds it (the paper's task test: the hand fixed at the
             # grasp, the wrench applied, the object unmoved)
-            pos0 = closed.xpos[scene.object_body].copy()
-            quat0 = closed.xquat[scene.object_body].copy()
-        n0 = int(round(closed.time / cfg.timestep_s))
+            pos0, quat0 = closed.xpos[scene.object_body].copy(), closed.xquat[scene.object_body].copy()
+        n0 = int(round(closed.time / self.cfg.timestep_s))
         if closed.warning[mujoco.mjtWarning.mjWARN_BADQACC].number or not np.all(np.isfinite(closed.qpos)):
-            dirs = [DirectionResult(False, math.inf, math.inf, True)] * n_dir
-            return done(result(Reason.UNSTABLE.value, False, dirs, steps=n0, **common))
-        mass = scene.object_mass
-        if test is None:
-            f = cfg.force_per_kg * mass
-            wrenches = np.array([[*(f * np.asarray(d)), 0.0, 0.0, 0.0] for d in DIRECTIONS])
-        else:
-            wrenches = test.disturbance(mass, pieces.scale, cfg.force_per_kg)[None]
-        pool = self._hold_pool()
-        dirs = hold(scene, closed, wrenches, datas[:len(wrenches)], pos0, quat0, self._hold_config(test), pool)
-        steps = n0 + sum(int(round(d.time / cfg.timestep_s)) - n0 for d in datas[:len(wrenches)])
-        failed = [i for i, d in enumerate(dirs) if d.success is False]
-        if not failed:
-            res = result(Reason.OK.value, True, dirs, steps=steps, **common)
-        else:
-            if any(dirs[i].unstable for i in failed):
-                reason = Reason.UNSTABLE.value
-            elif test is None:
-                reason = Reason.slipped(DIRECTION_NAMES[failed[0]])
-            else:
-                reason = Reason.SLIPPED_TASK.value
-            res = result(reason, False, dirs, steps=steps, **common)
-        if grid is None:
-            return done(res)
-        hold_cfg = self._hold_config(test)
+            return None, pos0, quat0, n0
+        return closed, pos0, quat0, n0
 
-        def holds(k: float) -> bool:
-            out = hold(scene, closed, k * wrenches, datas[:len(wrenches)], pos0, quat0, hold_cfg, pool)
-            return all(d.success for d in out)
 
-        # bisection: grid[lo] held (lo -1: nothing known held), grid[hi] failed (hi len(grid):
-        # nothing known to fail), until they are neighbours
-        one = grid.index(1.0)
-        lo, hi = (one, len(grid)) if res.success else (-1, one)
-        tested = [(1.0, res.success)]
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            ok = holds(grid[mid])
-            tested.append((grid[mid], ok))
-            lo, hi = (mid, hi) if ok else (lo, mid)
-        return done(res, grid[lo] if lo >= 0 else 0.0, tuple(tested))
+def six_direction_wrenches(cfg: EvalConfig, mass: float) -> np.ndarray:
+    """``(6, 6)`` the six-direction protocol's disturbances: a force of ``force_per_kg`` x mass
+    (N) along +-x, +-y, +-z (`DIRECTIONS` order), no torque."""
+    f = cfg.force_per_kg * mass
+    return np.array([[*(f * np.asarray(d)), 0.0, 0.0, 0.0] for d in DIRECTIONS])
+
+
+def task_wrenches(test: TaskTest, cfg: EvalConfig, mass: float, scale: float) -> np.ndarray:
+    """``(1, 6)`` a task test's disturbance -w_t on the object's joint, scaled as its YAML says."""
+    return test.disturbance(mass, scale, cfg.force_per_kg)[None]
+
+
+def _failure_reason(dirs: list[DirectionResult], test: TaskTest | None) -> str | None:
+    """The reason code of held directions (None: all passed): unstable, the first direction
+    that slipped (six directions) or ``slipped_task``."""
+    failed = [i for i, d in enumerate(dirs) if d.success is False]
+    if not failed:
+        return None
+    if any(dirs[i].unstable for i in failed):
+        return Reason.UNSTABLE.value
+    return Reason.slipped(DIRECTION_NAMES[failed[0]]) if test is None else Reason.SLIPPED_TASK.value
+
+
+def _bisect(grid: tuple, held_at_one: bool, holds) -> tuple[float, tuple]:
+    """``(held multiple, tested)``: bisection on ``grid`` for the largest multiple ``holds(k)``
+    holds, from the verdict at 1 (grid[lo] held, lo -1: nothing known held; grid[hi] failed, hi
+    len(grid): nothing known to fail; until they are neighbours)."""
+    one = grid.index(1.0)
+    lo, hi = (one, len(grid)) if held_at_one else (-1, one)
+    tested = [(1.0, held_at_one)]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        ok = holds(grid[mid])
+        tested.append((grid[mid], ok))
+        lo, hi = (mid, hi) if ok else (lo, mid)
+    return (grid[lo] if lo >= 0 else 0.0), tuple(tested)
+
+
+@dataclass(frozen=True)
+class _Verdict:
+    """Builds a `GraspResult` of one test for a hand (``n_dir`` directions)."""
+
+    hand: object
+    name: str
+    n_dir: int
+
+    def __call__(self, reason: str, success: bool = False, dirs: list[DirectionResult] | None = None,
+                 pre: float = math.nan, met: StaticMetrics | None = None, eps: float = math.nan,
+                 steps: int = 0) -> GraspResult:
+        nan, F = (math.nan,) * self.n_dir, len(self.hand.fingertip_names)
+        return GraspResult(
+            success=success, reason=reason, test=self.name,
+            direction_success=tuple(d.success for d in dirs) if dirs else (None,) * self.n_dir,
+            direction_translation_m=tuple(d.translation_m for d in dirs) if dirs else nan,
+            direction_rotation_deg=tuple(d.rotation_deg for d in dirs) if dirs else nan,
+            pregrasp_penetration_m=pre,
+            penetration_m=met.penetration if met else math.nan,
+            self_penetration_m=met.self_penetration if met else math.nan,
+            min_distance_m=met.min_distance if met else math.nan,
+            finger_distance_m=tuple(float(x) for x in met.finger_distance) if met else (math.nan,) * F,
+            touching_links=met.touching_links if met else 0,
+            num_contacts=len(met.contact_points) if met else 0,
+            epsilon=eps, sim_steps=steps)
