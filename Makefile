@@ -123,12 +123,14 @@ test-view: $(STAMP) browser
 
 # Grasp quality on real objects (issue 19): the default force-closure job per hand on
 # manifests/real_dev.jsonl -> benchmarks/results/quality.md. The meshes come from registry
-# packages (pybullet_data; metaworld's assets, installed without its dependencies).
+# packages (pybullet_data; metaworld's assets and MyoSuite's simhive objects, both installed without
+# their dependencies: only their mesh files are read). manifests/real_holdout.jsonl: the held-out set.
 .PHONY: real-objects bench-quality
 BENCH_QUALITY_ARGS ?=
 real-objects: $(STAMP)
 	$(PY) -m pip install --quiet pybullet==3.2.7
 	$(PY) -m pip install --quiet --no-deps metaworld==3.1.1
+	$(PY) -m pip install --quiet --no-deps myosuite==2.12.2
 
 bench-quality: $(STAMP) hands real-objects
 	$(PY) -m benchmarks.bench_quality $(BENCH_QUALITY_ARGS)

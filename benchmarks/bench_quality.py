@@ -43,9 +43,9 @@ COLUMNS = ["object_id", "object_scale_m", "success", "reason", "synth_epsilon", 
            "touching_links"]
 
 
-def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict) -> None:
+def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict, manifest: Path = MANIFEST) -> None:
     """``datagen run`` of the default force-closure job for ``hand`` (resumes a finished job)."""
-    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(MANIFEST),
+    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(manifest),
            "--objects", str(objects), "--hand", hand, "--tasks", "force_closure", "--grasps", str(grasps),
            "--no-progress"]
     if synth:
@@ -72,6 +72,15 @@ def failure_classes(rows: dict) -> collections.Counter:
     return out
 
 
+def with_scales(manifest: Path, scales: tuple[float, ...], work: Path) -> Path:
+    """A copy of ``manifest`` whose every entry has ``scales`` (metres), in ``work``."""
+    lines = [json.loads(x) for x in manifest.read_text().splitlines() if x.strip()]
+    out = work / f"{manifest.stem}-s{'_'.join(f'{s:g}' for s in scales)}.jsonl"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("".join(json.dumps({**x, "scales": list(scales)}, sort_keys=True) + "\n" for x in lines))
+    return out
+
+
 def summarize(rows: dict, sel: np.ndarray) -> dict:
     ok = np.asarray(rows["success"], dtype=bool)[sel]
     pen = np.asarray(rows["penetration_m"], dtype=float)[sel]
@@ -89,6 +98,8 @@ def main() -> None:
     ap.add_argument("--grasps", default="shadow=8,shadow_e3m5=4,allegro=4,leap=4",
                     help="grasps per object and scale, per hand (HAND=N,...; a plain N for every hand)")
     ap.add_argument("--objects", type=int, default=14, help="objects of the manifest (first N)")
+    ap.add_argument("--scales", default=None,
+                    help="comma-separated object scales, metres, for every object (default: the manifest's)")
     ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="job directories")
     ap.add_argument("--out", type=Path, default=RESULTS)
@@ -99,6 +110,8 @@ def main() -> None:
         k: int(v) for k, v in (x.split("=") for x in args.grasps.split(","))}
     commit = args.code or code_version()
     families = {e.id: e.family for e in load_manifest(MANIFEST)}
+    scales_arg = tuple(float(x) for x in args.scales.split(",")) if args.scales else None
+    manifest = with_scales(MANIFEST, scales_arg, args.work) if scales_arg else MANIFEST
     lines = ["# Grasp quality on real objects (default force-closure job)", "",
              f"Code {commit}; machine: {machine_description()}.", "",
              f"Objects: `manifests/real_dev.jsonl`, the first {args.objects} (pybullet and metaworld household "
@@ -110,8 +123,10 @@ def main() -> None:
     for hand in args.hands.split(","):
         grasps = per_hand[hand] if hand in per_hand else per_hand.get("*", 8)
         tag = "" if not synth else "-" + "-".join(f"{k}{v}" for k, v in sorted(synth.items()))
+        if scales_arg:
+            tag += "-s" + "_".join(f"{s:g}" for s in scales_arg)
         job = args.work / f"{hand}-{commit}-g{grasps}-o{args.objects}{tag}"
-        run_job(hand, job, grasps, args.objects, synth)
+        run_job(hand, job, grasps, args.objects, synth, manifest)
         rows = read_job(job, columns=COLUMNS).to_pydict()
         ledger = [json.loads(p.read_text()) for p in sorted((job / "ledger").glob("*.json"))]
         synth_s = sum(x["timings"].get("synth_s", 0) for x in ledger)
