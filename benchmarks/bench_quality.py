@@ -7,9 +7,9 @@ synthesized pose is a row: a pose rejected before simulation counts as a failure
 
 Reported per hand x scale and per object family: six-direction success, the share of poses in
 force closure at synthesis (synthesis epsilon > 0), MuJoCo's epsilon at the grasp, the successes'
-penetration at the grasp (p90, mm), successes without any touching link (must be 0), failure
-classes (never force closure at synthesis; rejected for pregrasp penetration; no contact;
-slipped), synthesis seconds per grasp, and per scale the successes' diversity
+penetration at the grasp (p90, mm), successes without any touching link (must be 0), synthesis
+seconds per grasp (failure mechanisms: `benchmarks/diagnose_sizes.py`), and per scale the
+successes' diversity
 (`datagen.eval.diversity`: DexGraspBench's PCA explained-variance ratio, GraspQP's mean joint
 entropy). Writes ``benchmarks/results/quality.md`` ending with
 ``quality: shadow=S e3m5=E allegro=A leap=L`` (percent over the default job's scales) and a
@@ -25,7 +25,6 @@ reported but it does not write the page unless the variant is empty).
 from __future__ import annotations
 
 import argparse
-import collections
 import json
 import os
 import subprocess
@@ -60,22 +59,6 @@ def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict, manife
     subprocess.run(cmd, check=True, cwd=ROOT)
 
 
-def failure_classes(rows: dict) -> collections.Counter:
-    """Each failed row's class: why it failed, in the order a reader would ask."""
-    out = collections.Counter()
-    for ok, reason, eps in zip(rows["success"], rows["reason"], rows["synth_epsilon"]):
-        if ok:
-            continue
-        if reason in ("penetration", "grasp_penetration", "self_penetration"):
-            out["rejected: " + reason] += 1
-        elif reason == "no_contact":
-            out["no contact at the grasp"] += 1
-        else:
-            what = "slipped" if reason.startswith("slipped") else reason
-            out[("in" if eps > 0 else "not in") + f" force closure at synthesis (fingertips), {what}"] += 1
-    return out
-
-
 def with_scales(manifest: Path, scales: tuple[float, ...], work: Path) -> Path:
     """A copy of ``manifest`` whose every entry has ``scales`` (metres), in ``work``."""
     lines = [json.loads(x) for x in manifest.read_text().splitlines() if x.strip()]
@@ -107,7 +90,7 @@ def diversity_lines(hand: str, rows: dict, scales: np.ndarray) -> list[str]:
     lo, hi = h.joint_lower.cpu().numpy(), h.joint_upper.cpu().numpy()
     ok = np.asarray(rows["success"], dtype=bool)
     q = np.asarray(rows["grasp_qpos"], dtype=np.float64)
-    out = ["| successes | n | PCA explained variance, top 1 / 2 / 3 / 4 / 5 | mean joint entropy |",
+    out = ["| successes (diversity) | n | PCA explained variance, top 1 / 2 / 3 / 4 / 5 | mean joint entropy |",
            "|---|---|---|---|"]
     for name, sel in [("all", ok)] + [(f"scale {s:g} m", ok & (scales == s)) for s in sorted(set(scales.tolist()))]:
         d = grasp_diversity(q[sel], lo, hi)
@@ -140,9 +123,9 @@ def hand_section(hand: str, job: Path, grasps: int, families: dict) -> tuple[lis
 
     lines.append(row("all", summarize(rows, np.ones(n, dtype=bool))))
     lines += [row(f"scale {s:g} m", summarize(rows, scales == s)) for s in sorted(set(scales.tolist()))]
-    lines += [row(f"family {f}", summarize(rows, fam == f)) for f in sorted(set(fam.tolist()))]
-    lines += ["", "Failure classes: " + ", ".join(f"{k} {v}" for k, v in failure_classes(rows).most_common())
-              + ".", "", "Diversity of the successes:", ""] + diversity_lines(hand, rows, scales) + [""]
+    lines += ["", "By family (success %, rows): " + ", ".join(
+        f"{f} {summarize(rows, fam == f)['success']:.0f} ({int((fam == f).sum())})" for f in sorted(set(fam.tolist())))
+              + ".", ""] + diversity_lines(hand, rows, scales) + [""]
     print(f"{hand}: {summarize(rows, np.ones(n, dtype=bool))['success']:.1f}% of {n}", flush=True)
     return lines, per_scale
 

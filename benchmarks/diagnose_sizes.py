@@ -336,8 +336,7 @@ def pct(a, b) -> str:
 
 def class_table(rows: list[dict]) -> list[str]:
     """Per hand x scale: success and the share of rows per failure class."""
-    classes = ["lost while closing", "slides under the load", "rotates under the load", "rejected before simulating",
-               "holds in the full replay"]
+    classes = ["lost while closing", "slides under the load", "rotates under the load", "rejected before simulating"]
     out = ["| hand | scale m | n | success % | " + " | ".join(c + " %" for c in classes) + " |",
            "|---|---|---|---|" + "---|" * len(classes)]
     for hand in HAND_TAGS:
@@ -367,7 +366,7 @@ def detail_table(rows: list[dict], scales) -> list[str]:
             n += 1
             c[detail_key(r)] += 1
     out = ["| class | detail | failures | % of failures |", "|---|---|---|---|"]
-    for (k, d), v in c.most_common(12):
+    for (k, d), v in c.most_common(8):
         out.append(f"| {k} | {d} | {v} | {pct(v, n)} |")
     return out
 
@@ -396,14 +395,17 @@ def attribute_table(rows: list[dict], hands, scales, attributes: dict, held: boo
     fails = [r for r in sim if not r["success"]]
     oks = [r for r in sim if r["success"]]
     out = ["| attribute | in failures % | in successes % | attributable failures % |", "|---|---|---|---|"]
-    ranked = []
+    ranked, none = [], []
     for desc, pred in attributes.values():
         af = attributable(sim, pred)
-        share = -1.0 if af is None else af / max(len(fails), 1)
+        if af is None:  # no size where both sides have 2 rows: nothing to compare
+            none.append(f"{desc} ({pct(sum(pred(r) for r in fails), len(fails))}% of failures)")
+            continue
+        share = af / max(len(fails), 1)
         ranked.append((share, f"| {desc} | {pct(sum(pred(r) for r in fails), len(fails))} | "
-                       f"{pct(sum(pred(r) for r in oks), len(oks))} | "
-                       + ("n/a" if af is None else f"{100 * share:.0f}") + " |"))
-    return ([f"{len(sim)} rows, {len(fails)} failures.", ""] + out
+                       f"{pct(sum(pred(r) for r in oks), len(oks))} | {100 * share:.0f} |"))
+    return ([f"{len(sim)} rows, {len(fails)} failures."
+             + (" No contrast within a size: " + "; ".join(none) + "." if none else ""), ""] + out
             + [x for _, x in sorted(ranked, key=lambda x: -x[0])])
 
 
@@ -479,12 +481,13 @@ def report(args) -> None:
     print("\n".join(lines))
 
 
-def pick_examples(rows: list[dict], hand: str, scales) -> list[tuple[str, dict]]:
+def pick_examples(rows: list[dict], hand: str, scales, obj: str = "") -> list[tuple[str, dict]]:
     """(name, row) per failure class of ``hand`` at ``scales`` (the most frequent detail, the
-    median object shift among those rows), and one success, for the pictures."""
+    median object shift among those rows), and one success, for the pictures; ``obj``: only
+    that object's rows."""
     from collections import Counter
 
-    sel = [r for r in rows if r["hand"] == hand and r["scale"] in scales]
+    sel = [r for r in rows if r["hand"] == hand and r["scale"] in scales and (not obj or r["object_id"] == obj)]
     out = []
     for (k, d), _ in Counter(detail_key(r) for r in sel if not r["success"]).most_common(3):
         cands = sorted((r for r in sel if not r["success"] and detail_key(r) == (k, d)),
@@ -509,10 +512,12 @@ def render(args) -> None:
 
     rows = load(args.out)
     cfg = EvalConfig()
-    for hand, scale in ((h, float(x)) for h, x in (a.split("@") for a in args.examples.split(","))):
+    for example in args.examples.split(","):
+        hand, scale, *obj = example.split("@")
+        scale = float(scale)
         job = next(args.work.glob(f"{hand}-0.*{args.tag}"))
         table = {r["grasp_id"]: r for r in read_job(job, columns=COLUMNS).to_pylist()}
-        for name, r in pick_examples(rows, hand, {scale}):
+        for name, r in pick_examples(rows, hand, {scale}, obj[0] if obj else ""):
             row = table[r["grasp_id"]]
             scene = build_scene(load_hand(hand), row_pieces(row, job), cfg)
             path = args.render_dir / f"{HAND_TAGS[hand]}_{scale:g}_{name}_{row['object_id'].split('__')[-1]}.png"
@@ -532,7 +537,7 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="bench_quality's job folder")
     ap.add_argument("--tag", default="-s0.06_0.08_0.1_0.12_0.15", help="job name suffix (the scales)")
     ap.add_argument("--out", type=Path, default=None, help="per-row measurements (JSON lines; default WORK/diagnosis.jsonl)")
-    ap.add_argument("--examples", default="shadow@0.12,shadow@0.15", help="render: HAND@SCALE,...")
+    ap.add_argument("--examples", default="shadow@0.12,shadow@0.15", help="render: HAND@SCALE[@OBJECT_ID],...")
     ap.add_argument("--render-dir", type=Path, default=Path("out/diagnosis"), help="render: PNG folder")
     ap.add_argument("--width", type=int, default=240, help="render: pixels per view (each cropped to half)")
     ap.add_argument("--height", type=int, default=180)
