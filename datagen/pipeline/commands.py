@@ -72,7 +72,7 @@ def _synth(args) -> int:
     import yaml
 
     from datagen._atomic import atomic_path
-    from datagen.hands import load_hand
+    from datagen.hands import load_hand, pin_hand
     from datagen.pipeline import BatchObject, build_targets, synthesize_rows
     from datagen.synth import SynthConfig
     from datagen.tasks import load_task
@@ -87,6 +87,9 @@ def _synth(args) -> int:
     cfg = dataclasses.replace(cfg, **overrides)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     hand = load_hand(args.hand, device=device)
+    # the table's folder keeps the hand its rows name (hands/<name>.yaml): eval, render, view and
+    # export load it from there, wherever the folder goes; refused now if another hand holds the name
+    pin_hand(hand.spec, Path(args.out).resolve().parent)
     task = load_task(args.task)
     processed = load_object(args.object, args.cache)
     # one batch object per scale: each target built at its own scale (grid from the grid cache)
