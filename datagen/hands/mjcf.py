@@ -29,7 +29,7 @@ from .spec import AssetRef, Coupling, HandSpecError
 log = logging.getLogger(__name__)
 
 __all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator_matrix",
-           "detect_couplings", "cache_dir"]
+           "detect_couplings", "cache_dir", "top_level_bodies", "urdf_mesh_files"]
 
 
 def cache_dir() -> Path:
@@ -352,3 +352,24 @@ def detect_couplings(model: mujoco.MjModel, max_slack: float = 0.2) -> list[Coup
     return out
 
 
+
+
+def top_level_bodies(source: Path) -> list[tuple[str, int]]:
+    """(name, joints below it) of each top-level body of the MJCF/URDF ``source`` (the hand is
+    usually the one with the most joints; a table, a floor or an object has few or none)."""
+    source = Path(source).resolve()
+    try:
+        if source.suffix.lower() == ".urdf":
+            spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
+        else:
+            spec = mujoco.MjSpec.from_file(str(source))
+    except HandSpecError:
+        raise
+    except Exception as exc:
+        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
+                            "check the file and the files it includes") from None
+
+    def joints(body) -> int:
+        return len([j for j in body.joints if j.type != mujoco.mjtJoint.mjJNT_FREE]) + sum(joints(b) for b in body.bodies)
+
+    return [(b.name, joints(b)) for b in spec.worldbody.bodies]

@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["load_object", "register_synth"]
+__all__ = ["load_object", "register_hand", "register_synth"]
 
 
 def load_object(path: str | Path, cache: str | None = None, process_config: str | None = None):
@@ -115,4 +115,33 @@ def _synth(args) -> int:
         pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
           f"({result.timings['optimize_s']:.1f} s optimizing on {device})")
+    return 0
+
+
+def register_hand(sub: argparse._SubParsersAction) -> None:
+    """``datagen hand init|check|calibrate``: init and check from `datagen.hands.commands`,
+    calibrate (synthesis + the MuJoCo test on procedural objects) from `datagen.pipeline.calibrate`."""
+    from datagen.hands.commands import add_init_and_check
+
+    p = sub.add_parser("hand", help="bring your own hand: propose a spec for an MJCF/URDF (init), check an "
+                       "edited one (check), tune it on procedural objects (calibrate)")
+    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    add_init_and_check(actions)
+    cal = actions.add_parser("calibrate", help="choose the hand's sphere margin by a short synthesis + MuJoCo run "
+                             "on procedural objects; writes the choice into the spec")
+    cal.add_argument("spec", help="hand spec YAML (rewritten with the choice unless --out is given)")
+    cal.add_argument("--out", default=None, help="write the calibrated spec here instead")
+    cal.add_argument("--objects", type=int, default=4, help="procedural objects of the run")
+    cal.add_argument("--grasps", type=int, default=4, help="grasps per object, scale and candidate")
+    cal.add_argument("--seed", type=int, default=0, help="seed of the run")
+    cal.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
+    cal.set_defaults(func=_calibrate, interrupted="the spec is unchanged; rerun the same command")
+
+
+def _calibrate(args) -> int:
+    from .calibrate import calibrate_spec, format_calibration
+
+    result = calibrate_spec(args.spec, out=args.out, objects=args.objects, grasps=args.grasps, seed=args.seed,
+                            cache=args.cache, log=lambda line: print(line, file=sys.stderr, flush=True))
+    print(format_calibration(result))
     return 0
