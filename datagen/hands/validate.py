@@ -22,7 +22,7 @@ import mujoco
 import numpy as np
 import torch
 
-from .geometry import link_shapes, sample_link_surface, union_depth
+from .geometry import link_shapes, points_outward, sample_link_surface, union_depth
 from .mjcf import detect_couplings
 from .spheres import sphere_coverage
 
@@ -140,9 +140,7 @@ def _fingertips(hand, rng, lim: Limits) -> list[Finding]:
             continue
         # outward: a step along the normal leaves the link, a step against it enters (robust at
         # the edges of boxes and hulls, where a surface gradient is undefined)
-        eps = lim.pad_probe_m
-        inside, outside = union_depth(shapes, np.stack([p - eps * n, p + eps * n]))
-        if not (inside > 0 > outside):
+        if not points_outward(shapes, p, n, lim.pad_probe_m):
             out.append(Finding("error", where, "the normal does not point out of the link's collision surface",
                                "set it to the pad's outward normal"))
         closing = _closing_direction(m, data, b, p)
