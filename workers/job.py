@@ -11,6 +11,7 @@ Layout (names are the constants below; paths relative to the job directory)::
     objects/<entry>/          processed objects the rows refer to (hard links into the cache)
     failures/manifest.parquet objects of the source that the manifest cannot hold (stage `manifest`)
     ledger/part-NNNNN.json    written last for a finished shard: its counts and timings
+    hands/<name>.yaml         the job's hand spec, pinned with its asset's hash (`workers.run.pin_job_hand`)
     progress/part-NNNNN.json  a running shard's progress (polled by the driver)
     .lock                     flock held by the running driver
     ray/                      Ray's temp dir when the path is short enough (else /tmp/dg-ray-*)
@@ -205,7 +206,7 @@ class JobConfig(Config):
                                f"(installed hands: {available_hands()})")
         elif not (Path(self.hand).suffix.lower() in (".yaml", ".yml") and Path(self.hand).is_file()):
             raise JobError(f"unknown hand {self.hand!r}; valid hands: {', '.join(sorted(BUILTIN_HANDS))} "
-                           "(or the path of a hand spec YAML: `datagen hand init` writes one)")
+                           "(or the path of a hand spec YAML)")
         try:
             return load_hand(self.hand)
         except HandSpecError as exc:
