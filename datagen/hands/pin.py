@@ -56,10 +56,11 @@ def _header(spec: HandSpec, origin: str | None) -> str:
             "Rows whose `hand` is this name are loaded with this file; do not edit it.")
 
 
-def pin_hand(spec: HandSpec, base: str | Path) -> Path:
+def pin_hand(spec: HandSpec, base: str | Path, *, write: bool = True) -> Path:
     """Write the pinned copy of ``spec`` to ``base/hands/<name>.yaml`` (atomically) and return its
     path. An existing copy with the same content is kept; one with other content (another spec
-    under the same name, or the asset's files changed since) raises `HandSpecError` naming both."""
+    under the same name, or the asset's files changed since) raises `HandSpecError` naming both.
+    ``write=False`` only checks (a command that writes its output last refuses early)."""
     pinned = pinned_spec(spec)
     path = pinned_path(base, spec.name)
     assert path is not None  # HandSpec validates its name
@@ -73,6 +74,7 @@ def pin_hand(spec: HandSpec, base: str | Path) -> Path:
         raise HandSpecError(path, f"holds another hand named {spec.name!r} than {spec.source_file or spec.name} "
                             f"({what})", "use the hand it was made with, another output folder, or give the "
                             "new hand another name")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    dump_spec(pinned, path, _header(pinned, spec.source_file))
+    if write:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        dump_spec(pinned, path, _header(pinned, spec.source_file))
     return path

@@ -90,7 +90,7 @@ def _import(args) -> int:
     hand = load_hand(args.hand, dtype=torch.float64)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    pin_hand(hand.spec, out.resolve().parent)  # the table's rows name it: eval loads it from there
+    pin_hand(hand.spec, out.resolve().parent, write=False)  # refused now if another hand holds the name
     files = _files(args.files)
     root = Path(args.root) if args.root else None
     if args.format == "dexgraspbench":
@@ -102,6 +102,7 @@ def _import(args) -> int:
 
         cols = read_bodex_files(files, hand, out.parent / "objects", root)
     table = imported_table(cols, hand, args.format, args.task)
+    pin_hand(hand.spec, out.resolve().parent)  # the rows name it: eval and render load it from there
     with atomic_path(out) as tmp:
         pq.write_table(table, tmp)
     print(f"wrote {out}: {table.num_rows} grasps of {len(set(cols['object_id']))} objects; next: "

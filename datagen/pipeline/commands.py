@@ -87,9 +87,10 @@ def _synth(args) -> int:
     cfg = dataclasses.replace(cfg, **overrides)
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     hand = load_hand(args.hand, device=device)
-    # the table's folder keeps the hand its rows name (hands/<name>.yaml): eval, render, view and
-    # export load it from there, wherever the folder goes; refused now if another hand holds the name
-    pin_hand(hand.spec, Path(args.out).resolve().parent)
+    # the table's folder keeps the hand its rows name (hands/<name>.yaml, written with the table):
+    # eval, render, view and export load it from there; refused now if another hand holds the name
+    folder = Path(args.out).resolve().parent
+    pin_hand(hand.spec, folder, write=False)
     task = load_task(args.task)
     processed = load_object(args.object, args.cache)
     # one batch object per scale: each target built at its own scale (grid from the grid cache)
@@ -111,6 +112,7 @@ def _synth(args) -> int:
               f"{pen:.1f} mm > 5 mm); mean energies {e}. Nothing written to {args.out}.", file=sys.stderr)
         return 3
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    pin_hand(hand.spec, folder)
     with atomic_path(args.out) as tmp:
         pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
