@@ -15,6 +15,8 @@ choice.
 from __future__ import annotations
 
 import dataclasses
+import shutil
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,7 +77,7 @@ def _objects(count: int, cache, log) -> list:
     return out
 
 
-def _run(hand, objects, margin: float, grasps: int, seed: int, cache) -> Candidate:
+def _run(hand, objects, margin: float, grasps: int, seed: int, cache, base: Path) -> Candidate:
     from datagen.eval import EvalConfig
     from datagen.synth import SynthConfig
 
@@ -83,8 +85,13 @@ def _run(hand, objects, margin: float, grasps: int, seed: int, cache) -> Candida
 
     t0 = time.perf_counter()
     cfg = SynthConfig(iters=_ITERS, seeds_per_grasp=_SEEDS, sphere_margin_m=margin)
-    rows = run_batch(objects, hand, ["force_closure"], cfg, EvalConfig(), grasps_per_object=grasps, seed=seed,
-                     grid_resolution=_GRID, cache=cache).rows
+    out = run_batch(objects, hand, ["force_closure"], cfg, EvalConfig(), grasps_per_object=grasps, seed=seed,
+                    grid_resolution=_GRID, cache=cache, base=base)
+    rows = out.rows
+    if rows.num_rows == 0:
+        first = out.failures[0] if out.failures else {}
+        raise ValueError(f"calibration of hand {hand.name!r}: no grasp rows at margin {margin * 1000:.2f} mm "
+                         f"({len(out.failures)} failures; first: {first.get('stage')}: {first.get('message')})")
     ok = np.asarray(rows.column("success").to_pylist(), dtype=bool)
     pen = np.asarray(rows.column("penetration_m").to_pylist(), dtype=float)
     p90 = float(np.percentile(pen[ok], 90)) if ok.any() else float("nan")
@@ -102,7 +109,7 @@ def calibrate_spec(spec_path: str | Path, *, out: str | Path | None = None, obje
                    seed: int = 0, cache: str | None = None, log: Callable[[str], None] = lambda _: None) -> Calibration:
     """Run the candidates on ``objects`` procedural objects (``grasps`` per object and scale each)
     and write the spec with the chosen margin to ``out`` (default: ``spec_path`` itself)."""
-    from datagen.hands import load_hand, load_spec
+    from datagen.hands import load_hand, load_spec, pin_hand
     from datagen.hands.derive import MARGIN_RANGE_M, derive_settings
     from datagen.hands.mjcf import flatten_hand, resolve_asset
     from datagen.hands.spec import dump_spec
@@ -118,14 +125,20 @@ def calibrate_spec(spec_path: str | Path, *, out: str | Path | None = None, obje
     lo, hi = MARGIN_RANGE_M
     margins = sorted({round(float(np.clip(m, lo, hi)), 6) for m in (derived - _SPREAD_M, derived, derived + _SPREAD_M)})
     objs = _objects(objects, cache, log)
+    # the evaluation loads the hand again by the rows' name: from a folder where it is pinned
+    base = Path(tempfile.mkdtemp(prefix="datagen-calibrate-"))
+    pin_hand(spec, base)
     log(f"calibrating {spec.name!r}: sphere margins {[round(m * 1000, 2) for m in margins]} mm on "
         f"{len(objs)} procedural objects x {len(CALIBRATION_SCALES)} scales x {grasps} grasps")
     results = []
-    for m in margins:
-        c = _run(hand, objs, m, grasps, seed, cache)
-        log(f"  margin {m * 1000:.2f} mm: {c.successes}/{c.grasps} hold, penetration p90 "
-            f"{c.penetration_p90_m * 1000:.2f} mm ({c.seconds:.0f} s)")
-        results.append(c)
+    try:
+        for m in margins:
+            c = _run(hand, objs, m, grasps, seed, cache, base)
+            log(f"  margin {m * 1000:.2f} mm: {c.successes}/{c.grasps} hold, penetration p90 "
+                f"{c.penetration_p90_m * 1000:.2f} mm ({c.seconds:.0f} s)")
+            results.append(c)
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
     chosen = _choose(results, round(derived, 6))
     target = Path(out) if out else spec_path
     header = _leading_comments(spec_path) + [
