@@ -305,8 +305,11 @@ def _discard_new_job(job: JobDir, remove_dir: bool) -> None:
     """Remove what `JobDir.init` and `prepare_manifest` wrote for a job that never started."""
     from datagen.io.layout import FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, OBJECTS_DIR, SHARDS_DIR
 
+    from datagen.hands.pin import HANDS_DIR
+
     for f in (job.path / JOB_JSON, job.manifest_failures_path, job.manifest_path):
         f.unlink(missing_ok=True)
+    shutil.rmtree(job.path / HANDS_DIR, ignore_errors=True)  # the hand pin_job_hand kept
     for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
         try:
             (job.path / d).rmdir()
