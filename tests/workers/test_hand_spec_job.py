@@ -82,9 +82,15 @@ def test_job_pins_the_hand_and_rows_name_it(moved_job):
 
 
 def test_eval_of_the_moved_job_gives_the_shard_verdicts(moved_job, tmp_path, capsys):
+    import json
+
+    import yaml
+
     job, rows = moved_job
     out = tmp_path / "evaluated" / "ev.parquet"
-    assert cli(["eval", str(job), "--out", str(out)]) == 0, capsys.readouterr().err
+    config = tmp_path / "eval.yaml"  # the job's own test (the tiny one), as its shards ran it
+    config.write_text(yaml.safe_dump(json.loads((job / "job.json").read_text())["config"]["eval"]))
+    assert cli(["eval", str(job), "--out", str(out), "--config", str(config)]) == 0, capsys.readouterr().err
     again = pq.read_table(out).to_pylist()
     cols = ("grasp_id", "success", "reason", "penetration_m", "dir_success")
     assert [[_clean(r[c]) for c in cols] for r in again] == [[_clean(r[c]) for c in cols] for r in rows]
