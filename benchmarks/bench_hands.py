@@ -20,10 +20,11 @@ from pathlib import Path
 
 import torch
 
-from benchmarks.common import machine_description
+from benchmarks.common import machine_description, replace_section
 from datagen.hands import available_hands, load_hand
 
 RESULTS = Path(__file__).parent / "results" / "hands.md"
+HEADING = "## Hand kinematics benchmark (`make bench-hands`)"
 
 
 def timings(fn, repeats: int) -> tuple[float, float]:
@@ -106,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     hands = args.hands or available_hands()
     rows = [r for name in hands for r in bench_hand(name, args.repeats, device)]
     lines = [
-        "# Hand kinematics benchmark (`make bench-hands`)",
+        HEADING,
         "",
         f"Machine: {machine}. Device: {device}, float32. Each cell: median (minimum) in ms of "
         f"{args.repeats} runs after a warm-up. Load average at the end: {os.getloadavg()[0]:.2f} "
@@ -126,8 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     missing = [n for n in ("shadow", "leap", "allegro", "shadow_e3m5") if n not in hands]
     if missing:
         lines += ["", f"Not measured (asset package not installed; `make hands`): {', '.join(missing)}."]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
+    replace_section(args.out, HEADING, lines)  # the page's other sections (bench_any_hand) are kept
     print(f"wrote {args.out}")
     return 0
 

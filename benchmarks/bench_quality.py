@@ -1,27 +1,30 @@
 """Grasp quality on real objects: the default force-closure job, per hand x scale x object family.
 
 Runs the product itself, ``datagen run`` (Ray, the default job config, nothing relaxed) on the
-real-object development set ``manifests/real_dev.jsonl`` (household meshes from pybullet and
-metaworld, ``make real-objects``) for each hand, then reads the job's rows. Every synthesized
-pose is a row: a pose rejected before simulation counts as a failure with its reason.
+real-object development set ``manifests/real_dev.jsonl`` (household meshes from pybullet,
+metaworld and MyoSuite, ``make real-objects``) for each hand, then reads the job's rows. Every
+synthesized pose is a row: a pose rejected before simulation counts as a failure with its reason.
 
 Reported per hand x scale and per object family: six-direction success, the share of poses in
 force closure at synthesis (synthesis epsilon > 0), MuJoCo's epsilon at the grasp, the successes'
-penetration at the grasp (p90, mm), successes without any touching link (must be 0), failure
-classes (never force closure at synthesis; rejected for pregrasp penetration; no contact;
-slipped), and synthesis seconds per grasp. Writes ``benchmarks/results/quality.md`` ending with
-``quality: shadow=S e3m5=E allegro=A leap=L`` (percent; default settings and the default
-scales 0.06 and 0.08 m; real objects).
+penetration at the grasp (p90, mm), successes without any touching link (must be 0), synthesis
+seconds per grasp (failure mechanisms: `benchmarks/diagnose_sizes.py`), and per scale the
+successes' diversity
+(`datagen.eval.diversity`: DexGraspBench's PCA explained-variance ratio, GraspQP's mean joint
+entropy). Writes ``benchmarks/results/quality.md`` ending with
+``quality: shadow=S e3m5=E allegro=A leap=L`` (percent over the default job's scales) and a
+``quality per scale:`` line. The page's hand-written sections (between the title and
+``## Tables``, and from ``## Notes``) are kept.
 
 Usage: ``make bench-quality`` or ``python -m benchmarks.bench_quality --hands shadow --grasps 8``;
-``--synth '{"seeds_per_grasp": 1}'`` runs a variant (its rows are reported but it does not write
-the machine-readable line unless the variant is empty).
+``--objects 25 --scales 0.06,0.08,0.1,0.12,0.15`` runs every development object at those sizes
+(on a copy of the manifest); ``--synth '{"seeds_per_grasp": 1}'`` runs a variant (its rows are
+reported but it does not write the page unless the variant is empty).
 """
 
 from __future__ import annotations
 
 import argparse
-import collections
 import json
 import os
 import subprocess
@@ -43,9 +46,9 @@ COLUMNS = ["object_id", "object_scale_m", "success", "reason", "synth_epsilon", 
            "touching_links"]
 
 
-def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict) -> None:
+def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict, manifest: Path = MANIFEST) -> None:
     """``datagen run`` of the default force-closure job for ``hand`` (resumes a finished job)."""
-    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(MANIFEST),
+    cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(manifest),
            "--objects", str(objects), "--hand", hand, "--tasks", "force_closure", "--grasps", str(grasps),
            "--no-progress"]
     if synth:
@@ -56,19 +59,12 @@ def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict) -> Non
     subprocess.run(cmd, check=True, cwd=ROOT)
 
 
-def failure_classes(rows: dict) -> collections.Counter:
-    """Each failed row's class: why it failed, in the order a reader would ask."""
-    out = collections.Counter()
-    for ok, reason, eps in zip(rows["success"], rows["reason"], rows["synth_epsilon"]):
-        if ok:
-            continue
-        if reason == "penetration":
-            out["rejected: " + reason] += 1
-        elif reason == "no_contact":
-            out["no contact at the grasp"] += 1
-        else:
-            what = "slipped" if reason.startswith("slipped") else reason
-            out[("in" if eps > 0 else "not in") + f" force closure at synthesis (fingertips), {what}"] += 1
+def with_scales(manifest: Path, scales: tuple[float, ...], work: Path) -> Path:
+    """A copy of ``manifest`` whose every entry has ``scales`` (metres), in ``work``."""
+    lines = [json.loads(x) for x in manifest.read_text().splitlines() if x.strip()]
+    out = work / f"{manifest.stem}-s{'_'.join(f'{s:g}' for s in scales)}.jsonl"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("".join(json.dumps({**x, "scales": list(scales)}, sort_keys=True) + "\n" for x in lines))
     return out
 
 
@@ -83,12 +79,65 @@ def summarize(rows: dict, sel: np.ndarray) -> dict:
             "no_touch": int((touch[ok] == 0).sum())}
 
 
+def diversity_lines(hand: str, rows: dict, scales: np.ndarray) -> list[str]:
+    """Per scale, the successes' diversity (`datagen.eval.diversity`): DexGraspBench's PCA
+    explained-variance ratio (top 1..5 components; lower = more diverse) and GraspQP's mean joint
+    entropy (nats; max ln 32 = 3.47)."""
+    from datagen.eval.diversity import grasp_diversity
+    from datagen.hands import load_hand
+
+    h = load_hand(hand)
+    lo, hi = h.joint_lower.cpu().numpy(), h.joint_upper.cpu().numpy()
+    ok = np.asarray(rows["success"], dtype=bool)
+    q = np.asarray(rows["grasp_qpos"], dtype=np.float64)
+    out = ["| successes (diversity) | n | PCA explained variance, top 1 / 2 / 3 / 4 / 5 | mean joint entropy |",
+           "|---|---|---|---|"]
+    for name, sel in [("all", ok)] + [(f"scale {s:g} m", ok & (scales == s)) for s in sorted(set(scales.tolist()))]:
+        d = grasp_diversity(q[sel], lo, hi)
+        out.append(f"| {name} | {d.n} | " + " / ".join(f"{x:.2f}" for x in d.pca) + f" | {d.joint_entropy:.2f} |")
+    return out
+
+
+def hand_section(hand: str, job: Path, grasps: int, families: dict) -> tuple[list[str], dict]:
+    """The page's section of one hand's job and its success per scale."""
+    rows = read_job(job, columns=COLUMNS + ["grasp_qpos"]).to_pydict()
+    ledger = [json.loads(p.read_text()) for p in sorted((job / "ledger").glob("*.json"))]
+    synth_s = sum(x["timings"].get("synth_s", 0) for x in ledger)
+    shard_wall = sum(x.get("wall_s", 0) for x in ledger)
+    n = len(rows["success"])
+    scales = np.round(np.asarray(rows["object_scale_m"], dtype=float), 4)
+    fam = np.array([families.get(o, "?") for o in rows["object_id"]])
+    default = np.isin(scales, np.round(np.asarray(JobConfig().scales, dtype=float), 4))
+    per_scale = {s: summarize(rows, scales == s)["success"] for s in sorted(set(scales.tolist()))}
+    per_scale["default"] = summarize(rows, default)["success"]
+    lines = [f"### {hand}", "",
+             f"{n} poses ({grasps} per object and scale); shard wall time {shard_wall:.0f} s in all, of which "
+             f"synthesis {synth_s / max(n, 1):.2f} s per grasp (shards ran 2 at a time on a machine shared "
+             "with other work).", "",
+             "| rows | n | success % | force closure at synthesis % | MuJoCo epsilon (median) | "
+             "successes' penetration p90 mm | successes without contact |", "|---|---|---|---|---|---|---|"]
+
+    def row(name, s):
+        return (f"| {name} | {s['n']} | {s['success']:.1f} | {s['fc']:.0f} | {s['eps']:.3f} | {s['pen90']:.2f} | "
+                f"{s['no_touch']} |")
+
+    lines.append(row("all", summarize(rows, np.ones(n, dtype=bool))))
+    lines += [row(f"scale {s:g} m", summarize(rows, scales == s)) for s in sorted(set(scales.tolist()))]
+    lines += ["", "By family (success %, rows): " + ", ".join(
+        f"{f} {summarize(rows, fam == f)['success']:.0f} ({int((fam == f).sum())})" for f in sorted(set(fam.tolist())))
+              + ".", ""] + diversity_lines(hand, rows, scales) + [""]
+    print(f"{hand}: {summarize(rows, np.ones(n, dtype=bool))['success']:.1f}% of {n}", flush=True)
+    return lines, per_scale
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hands", default=",".join(HANDS), help="comma-separated hands")
     ap.add_argument("--grasps", default="shadow=8,shadow_e3m5=4,allegro=4,leap=4",
                     help="grasps per object and scale, per hand (HAND=N,...; a plain N for every hand)")
     ap.add_argument("--objects", type=int, default=14, help="objects of the manifest (first N)")
+    ap.add_argument("--scales", default=None,
+                    help="comma-separated object scales, metres, for every object (default: the manifest's)")
     ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="job directories")
     ap.add_argument("--out", type=Path, default=RESULTS)
@@ -99,67 +148,57 @@ def main() -> None:
         k: int(v) for k, v in (x.split("=") for x in args.grasps.split(","))}
     commit = args.code or code_version()
     families = {e.id: e.family for e in load_manifest(MANIFEST)}
-    lines = ["# Grasp quality on real objects (default force-closure job)", "",
+    scales_arg = tuple(float(x) for x in args.scales.split(",")) if args.scales else None
+    manifest = with_scales(MANIFEST, scales_arg, args.work) if scales_arg else MANIFEST
+    lines = [TABLES, "",
              f"Code {commit}; machine: {machine_description()}.", "",
-             f"Objects: `manifests/real_dev.jsonl`, the first {args.objects} (pybullet and metaworld household "
-             "meshes, never used to choose a setting before this table was first made). Each hand runs the default "
-             "`datagen run` job (`--tasks force_closure`, the job's default synthesis and evaluation, the unchanged "
-             "six-direction MuJoCo test: 1 N for 2 s per direction, < 5 cm and < 15 deg). Every synthesized pose "
-             "is a row; rejections count as failures." + (f" Variant: synth {synth}." if synth else ""), ""]
+             f"Objects: `manifests/real_dev.jsonl`, the first {args.objects}"
+             + (f", every one at {', '.join(f'{s:g}' for s in scales_arg)} m" if scales_arg else "")
+             + ". Each hand runs the default `datagen run` job (`--tasks force_closure`, the job's default synthesis "
+             "and evaluation, the unchanged six-direction MuJoCo test: 1 N for 2 s per direction, < 5 cm and "
+             "< 15 deg). Every synthesized pose is a row; rejections count as failures."
+             + (f" Variant: synth {synth}." if synth else ""), ""]
     headline = {}
     for hand in args.hands.split(","):
         grasps = per_hand[hand] if hand in per_hand else per_hand.get("*", 8)
         tag = "" if not synth else "-" + "-".join(f"{k}{v}" for k, v in sorted(synth.items()))
+        if scales_arg:
+            tag += "-s" + "_".join(f"{s:g}" for s in scales_arg)
         job = args.work / f"{hand}-{commit}-g{grasps}-o{args.objects}{tag}"
-        run_job(hand, job, grasps, args.objects, synth)
-        rows = read_job(job, columns=COLUMNS).to_pydict()
-        ledger = [json.loads(p.read_text()) for p in sorted((job / "ledger").glob("*.json"))]
-        synth_s = sum(x["timings"].get("synth_s", 0) for x in ledger)
-        shard_wall = sum(x.get("wall_s", 0) for x in ledger)
-        n = len(rows["success"])
-        scales = np.round(np.asarray(rows["object_scale_m"], dtype=float), 4)
-        fam = np.array([families.get(o, "?") for o in rows["object_id"]])
-        everything = summarize(rows, np.ones(n, dtype=bool))
-        default = np.isin(scales, np.round(np.asarray(JobConfig().scales, dtype=float), 4))
-        headline[hand] = summarize(rows, default)["success"]  # the default job's scales
-        lines += [f"## {hand}", "",
-                  f"{n} poses ({grasps} per object and scale); shard wall time {shard_wall:.0f} s in all, of which "
-                  f"synthesis {synth_s / max(n, 1):.2f} s per grasp (shards ran 2 at a time on a machine shared "
-                  "with other work).", "",
-                  "| rows | n | success % | force closure at synthesis % | MuJoCo epsilon (median) | "
-                  "successes' penetration p90 mm | successes without contact |", "|---|---|---|---|---|---|---|"]
-
-        def row(name, s):
-            return (f"| {name} | {s['n']} | {s['success']:.1f} | {s['fc']:.0f} | {s['eps']:.3f} | {s['pen90']:.2f} | "
-                    f"{s['no_touch']} |")
-
-        lines.append(row("all", everything))
-        lines += [row(f"scale {s:g} m", summarize(rows, scales == s)) for s in sorted(set(scales.tolist()))]
-        lines += [row(f"family {f}", summarize(rows, fam == f)) for f in sorted(set(fam.tolist()))]
-        lines += ["", "Failure classes: " + ", ".join(f"{k} {v}" for k, v in failure_classes(rows).most_common())
-                  + ".", ""]
-        print(f"{hand}: {everything['success']:.1f}% of {n}", flush=True)
-    notes = _notes(args.out)
-    lines += notes
+        run_job(hand, job, grasps, args.objects, synth, manifest)
+        section, headline[hand] = hand_section(hand, job, grasps, families)
+        lines += section
+    head, notes = _kept(args.out)
+    lines = [TITLE, ""] + head + lines + notes
     if not synth:
-        lines.append(f"Headline: six-direction success over the default job's scales {JobConfig().scales} m "
-                     "(0.10 m is reported in the tables, not in this line).")
-        lines.append("quality: " + " ".join(f"{HANDS[h]}={headline[h]:.1f}" if h in headline else f"{HANDS[h]}=n/a"
-                                            for h in HANDS))
-    if not synth:
+        lines.append(f"Headline: six-direction success over the default job's scales {JobConfig().scales} m on the "
+                     f"objects above; the per-scale line covers every scale run.")
+        lines.append("quality: " + " ".join(f"{HANDS[h]}={headline[h]['default']:.1f}" if h in headline
+                                            else f"{HANDS[h]}=n/a" for h in HANDS))
+        lines.append("quality per scale: " + "; ".join(
+            f"{HANDS[h]} " + " ".join(f"{s:g}={v:.1f}" for s, v in headline[h].items() if s != "default")
+            for h in HANDS if h in headline))
         args.out.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines[-1:]))
+    print("\n".join(lines[-2:]))
 
 
-def _notes(path: Path) -> list[str]:
-    """The hand-written section (from '## Notes' to the machine-readable line), kept across runs."""
+TITLE = "# Grasp quality on real objects (default force-closure job)"
+TABLES = "## Tables (`make bench-quality`)"
+
+
+def _kept(path: Path) -> tuple[list[str], list[str]]:
+    """The hand-written sections kept across runs: the one between the title and the tables
+    (e.g. a diagnosis), and the notes (from '## Notes' to the machine-readable lines)."""
     if not path.is_file():
-        return []
+        return [], []
     text = path.read_text().splitlines()
-    if "## Notes" not in text:
-        return []
-    notes = text[text.index("## Notes"):]
-    return [x for x in notes if not x.startswith(("quality: ", "Headline: "))]
+    end = text.index(TABLES) if TABLES in text else next((i for i, x in enumerate(text) if x.startswith("## ")),
+                                                         len(text))
+    head = text[1:end]
+    while head and not head[0].strip():
+        head = head[1:]
+    notes = text[text.index("## Notes"):] if "## Notes" in text else []
+    return head if TABLES in text else [], [x for x in notes if not x.startswith(("quality", "Headline: "))]
 
 
 if __name__ == "__main__":

@@ -69,3 +69,29 @@ def hand_notes(path, heading: str = "## Notes") -> list[str]:
         return []
     end = next((i for i in range(start, len(lines)) if lines[i].startswith("```")), len(lines))
     return lines[start:end]
+
+
+def replace_section(path, heading: str, lines: list[str], first: bool = False) -> None:
+    """Write ``lines`` (starting with the ``## `` ``heading``) as that section of the markdown page at
+    ``path``: the old section (up to the next ``## `` heading) is replaced, the page's other sections
+    are kept; a new section goes first (after the page title) when ``first``, else last."""
+    from pathlib import Path
+
+    path = Path(path)
+    old = path.read_text().splitlines() if path.is_file() else []
+    title = [old.pop(0), ""] if old and old[0].startswith("# ") else ["# " + path.stem.capitalize(), ""]
+    while old and not old[0].strip():
+        old.pop(0)
+    sections, cur = [], []
+    for line in old:
+        if line.startswith("## ") and cur:
+            sections.append(cur)
+            cur = []
+        cur.append(line)
+    if cur:
+        sections.append(cur)
+    sections = [s for s in sections if s[0].strip() != heading.strip()]
+    new = list(lines) + ([""] if lines and lines[-1].strip() else [])
+    sections = [new, *sections] if first else [*sections, new]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(title + [x for s in sections for x in s]).rstrip("\n") + "\n")

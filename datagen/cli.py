@@ -26,6 +26,7 @@ REGISTRARS: dict[str, str] = {
     "tasks": "datagen.listing:register_tasks",
     "manifest": "datagen.objects.commands:register_manifest",
     "prepare": "datagen.pipeline.commands:register_prepare",
+    "hand": "datagen.pipeline.commands:register_hand",
     "synth": "datagen.pipeline.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",

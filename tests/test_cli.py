@@ -175,4 +175,5 @@ def test_ctrl_c_in_eval_writes_nothing(tmp_path, meshes):
     code, err = interrupt(["eval", str(many), "--out", str(out), "--workers", "2"],
                           lambda pid: _children(pid) >= 2, settle_s=2.0)  # both workers simulating
     _check(code, err, f"datagen eval: interrupted; nothing written to {out}; rerun the same command")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "g.parquet", "g200.parquet"]
+    # hands/: the hand the synth table's rows name, pinned beside it by synth (datagen.hands.pin)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "g.parquet", "g200.parquet", "hands"]

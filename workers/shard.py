@@ -33,7 +33,7 @@ from .job import JobConfig, JobDir
 
 __all__ = ["run_shard", "write_table_atomic", "shard_seed"]
 
-_HANDS: dict = {}  # hand name -> HandModel, reused by a Ray worker across shards
+_HANDS: dict = {}  # (pinned spec, its mtime, device) -> HandModel, reused by a Ray worker across shards
 
 
 def shard_seed(cfg: JobConfig, index: int) -> int:
@@ -78,12 +78,16 @@ def _failure(fails: list, shard: int, object_id: str, stage: str, reason: str, m
     fails.append({**failure(object_id, stage, reason, message, scale, task), "shard": shard})
 
 
-def _hand(name: str, device: str):
-    from datagen.hands import load_hand
+def _hand(name: str, job: JobDir, device: str):
+    """The job's hand: the copy pinned in the job directory (``hands/<name>.yaml``), else (a job
+    made before hands were pinned) ``name`` as the config gives it. Reused by a Ray worker while
+    the pinned file is unchanged."""
+    from datagen.hands import hand_spec_path, load_hand
 
-    key = (name, device)
+    path = hand_spec_path(name, job.path)
+    key = (str(path), path.stat().st_mtime_ns if path.is_file() else 0, device)
     if key not in _HANDS:
-        _HANDS[key] = load_hand(name, device=device)
+        _HANDS[key] = load_hand(name, device=device, base=job.path)
     return _HANDS[key]
 
 
@@ -190,7 +194,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     timings["process_s"] = time.perf_counter() - t0
 
     # 2-4. synthesis targets, synthesis per task, MuJoCo evaluation (datagen.pipeline)
-    hand = _hand(cfg.hand, device)
+    hand = _hand(provenance.get("hand") or cfg.hand, job, device)
 
     def moved(done: float, total: float) -> None:
         progress.total = len(entries) + total

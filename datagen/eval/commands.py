@@ -44,13 +44,15 @@ def _eval(args) -> int:
 
     from datagen._atomic import atomic_path
 
-    from .table import evaluate_table, read_grasps, table_base
+    from .table import evaluate_table, pin_table_hands, read_grasps, table_base
 
     cfg = _load_config(args.config, args.threads)
     table = read_grasps(args.grasps)
+    base = table_base(args.grasps)
     t0 = time.perf_counter()
-    out = evaluate_table(table, cfg, base=table_base(args.grasps), workers=args.workers)
+    out = evaluate_table(table, cfg, base=base, workers=args.workers)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    pin_table_hands(out, base, table_base(Path(args.out).resolve().parent))
     with atomic_path(args.out) as tmp:
         pq.write_table(out, tmp)
     ok = sum(out.column("success").to_pylist())
@@ -92,7 +94,7 @@ def _render(args) -> int:
             raise ValueError(f"row {i} is out of range (the table has {table.num_rows} rows)")
         row = table.slice(i, 1).to_pylist()[0]
         name = str(row["hand"])
-        hands.setdefault(name, load_hand(name))
+        hands.setdefault(name, load_hand(name, base=base))
         test = cfg.task_test(str(row["task"]))
         scene = build_scene(hands[name], row_pieces(row, base), cfg, test)
         path = render_grasp(scene, row_poses(row), cfg, Path(args.out) / f"grasp_{i:06d}_{row['object_id']}.png",

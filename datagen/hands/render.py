@@ -19,7 +19,7 @@ from datagen._atomic import atomic_write_bytes
 from .mjcf import FlatHand
 from .spec import HandSpec, HandSpecError
 
-__all__ = ["render_spec", "write_png"]
+__all__ = ["render_spec", "render_spec_file", "write_png"]
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
@@ -99,3 +99,12 @@ def render_spec(spec: HandSpec, flat: FlatHand, path: str | Path, *, width: int 
     finally:
         renderer.close()
     write_png(path, np.concatenate(frames, axis=1))
+
+
+def render_spec_file(spec_path: str, png: str) -> None:
+    """`render_spec` of the spec file at ``spec_path`` (a process pool's entry point: plain arguments)."""
+    from .load import load_hand
+
+    hand = load_hand(spec_path)
+    flat = FlatHand(xml=hand.mjcf_path.read_text(), model=hand.mj_model, path=hand.mjcf_path, source=hand.mjcf_path)
+    render_spec(hand.spec, flat, png)

@@ -79,15 +79,20 @@ class AssetRef:
 
     ``package`` set: ``path`` is relative to that installed Python package's directory (registry
     assets are referenced, never copied). ``package`` empty: ``path`` is absolute or relative to
-    the spec file's directory.
+    the spec file's directory. ``sha256``: set in a pinned copy (a job's ``hands/NAME.yaml``):
+    `datagen.hands.asset.asset_sha256` of the files the spec was used with; loading refuses other
+    bytes.
     """
 
     path: str
     package: str = ""
+    sha256: str = ""
 
     def __post_init__(self) -> None:
         if not self.path:
             raise HandSpecError(None, "mjcf.path is empty")
+        if self.sha256 and (len(self.sha256) != 64 or any(c not in "0123456789abcdef" for c in self.sha256)):
+            raise HandSpecError(None, f"mjcf.sha256 must be 64 lowercase hex digits, got {self.sha256!r}")
 
 
 @dataclass(frozen=True)
@@ -232,7 +237,11 @@ class HandSpec:
             if isinstance(mj, str):
                 mjcf = AssetRef(path=mj)
             elif isinstance(mj, Mapping):
-                mjcf = AssetRef(path=str(mj.get("path", "")), package=str(mj.get("package", "") or ""))
+                extra = sorted(set(mj) - {"path", "package", "sha256"})
+                if extra:
+                    raise HandSpecError(p, f"mjcf: unknown keys {extra}", "allowed: path, package, sha256")
+                mjcf = AssetRef(path=str(mj.get("path", "")), package=str(mj.get("package", "") or ""),
+                                sha256=str(mj.get("sha256", "") or ""))
             else:
                 raise HandSpecError(p, "mjcf must be a path or a mapping {package, path}")
             if not isinstance(data["spheres"], Mapping):
@@ -303,6 +312,8 @@ class HandSpec:
         mjcf: dict[str, Any] = {"path": self.mjcf.path}
         if self.mjcf.package:
             mjcf = {"package": self.mjcf.package, "path": self.mjcf.path}
+        if self.mjcf.sha256:
+            mjcf["sha256"] = self.mjcf.sha256
         return {
             "version": SPEC_VERSION,
             "name": self.name,

@@ -38,10 +38,11 @@ def _export(args) -> int:
             raise ValueError(f"{args.source}: no success column (evaluate it first: datagen eval)")
         table = table.filter(pc.equal(table["success"], True))
     hands = sorted(set(table["hand"].to_pylist()))
+    base = table_base(args.source)
     written = []
     for name in hands:
         part = table.filter(pc.equal(table["hand"], name))
-        written += export_grasps(part, table_base(args.source), Path(args.out), load_hand(name, dtype=torch.float64))
+        written += export_grasps(part, base, Path(args.out), load_hand(name, dtype=torch.float64, base=base))
     print(f"wrote {len(written)} DexGraspBench grasp files under {Path(args.out) / 'graspdata'} "
           f"(objects under {Path(args.out) / 'objects'})", file=sys.stderr)
     return 0
@@ -82,13 +83,14 @@ def _import(args) -> int:
     import torch
 
     from datagen._atomic import atomic_path
-    from datagen.hands import load_hand
+    from datagen.hands import load_hand, pin_hand
 
     from .rows import imported_table
 
     hand = load_hand(args.hand, dtype=torch.float64)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    pin_hand(hand.spec, out.resolve().parent, write=False)  # refused now if another hand holds the name
     files = _files(args.files)
     root = Path(args.root) if args.root else None
     if args.format == "dexgraspbench":
@@ -100,6 +102,7 @@ def _import(args) -> int:
 
         cols = read_bodex_files(files, hand, out.parent / "objects", root)
     table = imported_table(cols, hand, args.format, args.task)
+    pin_hand(hand.spec, out.resolve().parent)  # the rows name it: eval and render load it from there
     with atomic_path(out) as tmp:
         pq.write_table(table, tmp)
     print(f"wrote {out}: {table.num_rows} grasps of {len(set(cols['object_id']))} objects; next: "

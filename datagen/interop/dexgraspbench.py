@@ -24,6 +24,8 @@ import pyarrow as pa
 
 from datagen._atomic import atomic_path
 
+from datagen.hands.load import builtin_of
+
 from .frames import PeerHand, from_peer, matrix_to_pose7, pose7_to_matrix, to_peer
 from .objects import export_object, import_object
 
@@ -61,7 +63,7 @@ def export_grasps(table: pa.Table, base: Path, out: Path, hand) -> list[Path]:
     """Write every row of ``table`` (grasps of ``hand``, a float64 `HandModel`) as DexGraspBench
     ``.npy`` files under ``out/graspdata`` and their objects under ``out/objects``. Relative
     ``object_path`` values are resolved against ``base``. Returns the written files."""
-    peer = peer_hand(hand.name)
+    peer = peer_hand(builtin_of(hand.spec) or hand.name)
     out = Path(out).resolve()
     rows = table.select(["object_id", "object_scale_m", "object_path", "hand", "grasp_id", *POSE_KEYS]).to_pylist()
     if any(r["hand"] != hand.name for r in rows):

@@ -7,6 +7,8 @@
     failures.parquet             all failures
     objects/<entry>/             processed objects; rows' ``object_path`` is relative to the job dir
     ledger/part-NNNNN.json       present once shard N is finished (its counts and timings)
+    hands/<name>.yaml            the job's hand, pinned (`datagen.hands.pin.HANDS_DIR`): rows' ``hand``
+                                 names it; readers load it from here (``load_hand(name, base=job)``)
 """
 
 JOB_JSON = "job.json"

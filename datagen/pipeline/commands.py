@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["add_recipe_arguments", "read_config", "recipe_flags", "register_prepare", "register_synth"]
+__all__ = ["add_recipe_arguments", "read_config", "recipe_flags", "register_hand", "register_prepare", "register_synth"]
 
 
 def add_recipe_arguments(p: argparse.ArgumentParser) -> None:
@@ -83,7 +83,7 @@ def _synth(args) -> int:
     import torch
 
     from datagen._atomic import atomic_path
-    from datagen.hands import load_hand
+    from datagen.hands import load_hand, pin_hand
 
     from .api import load_object
     from .batch import BatchObject, build_targets, synthesize_rows
@@ -95,6 +95,10 @@ def _synth(args) -> int:
     cfg = recipe.synth
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     hand = load_hand(args.hand, device=device)
+    # the table's folder keeps the hand its rows name (hands/<name>.yaml, written with the table):
+    # eval, render, view and export load it from there; refused now if another hand holds the name
+    folder = Path(args.out).resolve().parent
+    pin_hand(hand.spec, folder, write=False)
     processed = load_object(args.object, recipe.process, args.cache)
     targets = build_targets([BatchObject(processed, tuple(args.scale))], grid_resolution=recipe.grid_resolution,
                             cache=args.cache, device=device)
@@ -115,6 +119,7 @@ def _synth(args) -> int:
               f"{pen:.1f} mm > 5 mm); mean energies {e}. Nothing written to {args.out}.", file=sys.stderr)
         return 3
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    pin_hand(hand.spec, folder)
     with atomic_path(args.out) as tmp:
         pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
@@ -150,4 +155,33 @@ def _prepare(args) -> int:
     if args.results:
         write_results(results, args.results)
     print(summarize(results))
+    return 0
+
+
+def register_hand(sub: argparse._SubParsersAction) -> None:
+    """``datagen hand init|check|calibrate``: init and check from `datagen.hands.commands`,
+    calibrate (synthesis + the MuJoCo test on procedural objects) from `datagen.pipeline.calibrate`."""
+    from datagen.hands.commands import add_init_and_check
+
+    p = sub.add_parser("hand", help="bring your own hand: propose a spec for an MJCF/URDF (init), check an "
+                       "edited one (check), tune it on procedural objects (calibrate)")
+    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    add_init_and_check(actions)
+    cal = actions.add_parser("calibrate", help="choose the hand's sphere margin by a short synthesis + MuJoCo run "
+                             "on procedural objects; writes the choice into the spec")
+    cal.add_argument("spec", help="hand spec YAML (rewritten with the choice unless --out is given)")
+    cal.add_argument("--out", default=None, help="write the calibrated spec here instead")
+    cal.add_argument("--objects", type=int, default=4, help="procedural objects of the run")
+    cal.add_argument("--grasps", type=int, default=4, help="grasps per object, scale and candidate")
+    cal.add_argument("--seed", type=int, default=0, help="seed of the run")
+    cal.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
+    cal.set_defaults(func=_calibrate, interrupted="the spec is unchanged; rerun the same command")
+
+
+def _calibrate(args) -> int:
+    from .calibrate import calibrate_spec, format_calibration
+
+    result = calibrate_spec(args.spec, out=args.out, objects=args.objects, grasps=args.grasps, seed=args.seed,
+                            cache=args.cache, log=lambda line: print(line, file=sys.stderr, flush=True))
+    print(format_calibration(result))
     return 0

@@ -36,7 +36,7 @@ class Browser:
         import viser
 
         self.source = source
-        self.cache = SceneCache(source.eval_config)
+        self.cache = SceneCache(source.eval_config, base=source.base)
         self.server = viser.ViserServer(host=host, port=port, verbose=False, label="datagen view")
         self.server.scene.set_up_direction("+z")
         self.drawing = GraspDrawing(self.server.scene)

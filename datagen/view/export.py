@@ -35,7 +35,7 @@ def export_html(source: GraspSource, rows: list[int], out_dir: str | Path, *,
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cache = SceneCache(source.eval_config)
+    cache = SceneCache(source.eval_config, base=source.base)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     pages = []
     try:

@@ -137,9 +137,12 @@ class PosedGrasp:
 
 
 class SceneCache:
-    """Hands and scenes by (hand, object, scale, task), most recently used kept (``size``)."""
+    """Hands and scenes by (hand, object, scale, task), most recently used kept (``size``). Hands
+    are loaded as the rows of ``base`` name them (a job directory or a table's folder: its pinned
+    hands first, `datagen.hands.load_hand`)."""
 
-    def __init__(self, eval_config: dict | None = None, size: int = 8) -> None:
+    def __init__(self, eval_config: dict | None = None, size: int = 8, base: Path | None = None) -> None:
+        self.base = base
         try:
             self.cfg = EvalConfig.from_dict(eval_config or {})
         except EvalError:
@@ -153,7 +156,7 @@ class SceneCache:
 
         if name not in self._hands:
             try:
-                self._hands[name] = load_hand(name)
+                self._hands[name] = load_hand(name, base=self.base)
             except HandSpecError as exc:
                 raise ViewError(f"hand {name!r}", str(exc)) from None
         return self._hands[name]
