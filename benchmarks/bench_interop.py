@@ -38,8 +38,7 @@ from benchmarks.common import hand_notes, machine_description, write_report
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "interop.md"
 PEER_NAME = {"leap": "leap", "allegro": "allegro", "shadow_e3m5": "shadow"}
-VARIANTS = {"default": {}, "full hold": {"settle_checks": 0}, "uniform": {"protocol": "uniform"},
-            "uniform, full hold": {"protocol": "uniform", "settle_checks": 0}}
+VARIANTS = {"default": {}, "full hold": {"settle_checks": 0}, "uniform": {"protocol": "uniform"}}
 
 
 def export(job: Path, out: Path) -> dict[str, str]:
@@ -128,14 +127,12 @@ def main(argv=None) -> None:
         ours = {v: our_verdicts(job, hand, v, work / "ours" / f"{hand}_{v.replace(' ', '_').replace(',', '')}.json")
                 for v in VARIANTS}
         ids = [k for k in ours["default"] if not k.startswith("_")]
-        for pv in ("default", "uniform"):
-            fv = "full hold" if pv == "default" else "uniform, full hold"
-            a, b = ours[pv], ours[fv]
-            fp = [g for g in ids if a[g]["succ"] and not b[g]["succ"]]
-            ff = [g for g in ids if b[g]["succ"] and not a[g]["succ"]]
-            early.append((hand, pv, len(ids), sum(b[g]["succ"] for g in ids), fp, ff,
-                          sum(a[g]["steps"] for g in ids) / max(1, sum(b[g]["steps"] for g in ids)),
-                          a["_cpu_s"] / len(ids), b["_cpu_s"] / len(ids), [b[g] for g in fp]))
+        a, b = ours["default"], ours["full hold"]
+        fp = [g for g in ids if a[g]["succ"] and not b[g]["succ"]]
+        ff = [g for g in ids if b[g]["succ"] and not a[g]["succ"]]
+        early.append((hand, len(ids), sum(b[g]["succ"] for g in ids), fp, ff,
+                      sum(a[g]["steps"] for g in ids) / max(1, sum(b[g]["steps"] for g in ids)),
+                      a["_cpu_s"] / len(ids), b["_cpu_s"] / len(ids), [b[g] for g in fp]))
         if item not in args.job:
             continue
         files = export(job, save_root / f"datagen_{PEER_NAME[hand]}")
@@ -177,17 +174,16 @@ def main(argv=None) -> None:
             lines.append(f"| {h} | {o} | {s:.3f} | {ps} | {dp * 1000:.1f} | {da:.2f} | {r} | "
                          f"{'' if rot is None else f'{rot:.2f}'} | {'' if tr is None else f'{tr * 1000:.1f}'} | {full} |")
         lines.append("")
-    lines += ["## Early pass against the full hold", "",
-              "| hand | protocol | rows | successes (full hold) | false passes | false fails | steps, early / full | "
-              "CPU s per grasp, early / full |", "|---|---|---|---|---|---|---|---|"]
-    for hand, pv, n, succ, fp, ff, steps, ce, cf, _ in early:
-        proto = "dexgraspbench" if pv == "default" else "uniform"
-        lines.append(f"| {hand} | {proto} | {n} | {succ} | {len(fp)} | {len(ff)} | {steps:.3f} | {ce:.3f} / {cf:.3f} |")
-    fps = [(h, pv, r) for h, pv, *_, rs in early for r in rs]
+    lines += ["## Early pass against the full hold (the default protocol)", "",
+              "| hand | rows | successes (full hold) | false passes | false fails | steps, early / full | "
+              "CPU s per grasp, early / full |", "|---|---|---|---|---|---|---|"]
+    for hand, n, succ, fp, ff, steps, ce, cf, _ in early:
+        lines.append(f"| {hand} | {n} | {succ} | {len(fp)} | {len(ff)} | {steps:.3f} | {ce:.3f} / {cf:.3f} |")
+    fps = [(h, r) for h, *_, rs in early for r in rs]
     if fps:
         lines += ["", "False passes (the full hold's failing figures): " + "; ".join(
-            f"{h} ({'dexgraspbench' if pv == 'default' else 'uniform'}) {r['object']} {r['scale']:.2f} m: {r['reason']}, "
-            f"{r['rot']:.3f} deg, {r['trans'] * 1000:.1f} mm" for h, pv, r in fps) + "."]
+            f"{h} {r['object']} {r['scale']:.2f} m: {r['reason']}, {r['rot']:.3f} deg, {r['trans'] * 1000:.1f} mm"
+            for h, r in fps) + "."]
     kept = hand_notes(args.out)
     write_report(args.out, lines + ([""] + kept if kept else []) + [""])
 
