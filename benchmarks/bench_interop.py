@@ -108,6 +108,9 @@ def main(argv=None) -> None:
     ap.add_argument("--peer", required=True, help="DexGraspBench checkout (1e7a5a6, Menagerie submodule)")
     ap.add_argument("--peer-python", required=True, help="Python of the peer's environment (mujoco 3.3.2)")
     ap.add_argument("--work", required=True, help="scratch folder: exports, the peer's outputs, cached verdicts")
+    ap.add_argument("--peer-mj4", default="", help="optional: a copy of the peer made to run on this project's "
+                    "MuJoCo (a diagnostic of the version's share of the disagreements), and --peer-mj4-python")
+    ap.add_argument("--peer-mj4-python", default="")
     ap.add_argument("--workers", type=int, default=2, help="the peer's n_worker")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
@@ -120,7 +123,7 @@ def main(argv=None) -> None:
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=ROOT).stdout.strip()
     machine = machine_description()
-    rows, early, details, timing = [], [], [], []
+    rows, early, details, timing, mj4 = [], [], [], [], []
     for item in args.job + args.early_only:
         hand, _, job = item.partition("=")
         job = Path(job).resolve()
@@ -144,6 +147,18 @@ def main(argv=None) -> None:
         for v in VARIANTS:
             row.append((sum(ours[v][g]["succ"] for g, _ in pairs), sum(ours[v][g]["succ"] == t["succ"] for g, t in pairs)))
         rows.append(row)
+        if args.peer_mj4:  # the same files under the peer's loop on this project's MuJoCo
+            root4 = work / "peer_out_mj4"
+            link = root4 / f"datagen_{PEER_NAME[hand]}" / "graspdata"
+            if not link.exists():
+                link.parent.mkdir(parents=True, exist_ok=True)
+                link.symlink_to(save_root / f"datagen_{PEER_NAME[hand]}" / "graspdata")
+            run_peer(Path(args.peer_mj4), args.peer_mj4_python, PEER_NAME[hand], root4, args.workers)
+            t4 = peer_verdicts(root4, PEER_NAME[hand])
+            both = [(files[f], theirs[f], t4[f]) for f in files if f in theirs and f in t4]
+            mj4.append((hand, len(both), sum(c["succ"] for _, _, c in both),
+                        sum(t["succ"] == c["succ"] for _, t, c in both),
+                        {v: sum(ours[v][g]["succ"] == c["succ"] for g, _, c in both) for v in VARIANTS}))
         for g, t in pairs:
             o = ours["default"][g]
             if o["succ"] != t["succ"]:
@@ -163,6 +178,14 @@ def main(argv=None) -> None:
              "|---|---|---|" + "---|" * len(VARIANTS)]
     for hand, n, ps, *vs in rows:
         lines.append(f"| {hand} | {n} | {ps} | " + " | ".join(f"{s} succ; agree {_pct(a, n)}" for s, a in vs) + " |")
+    if mj4:
+        lines += ["", f"The peer's loop on this project's MuJoCo ({mujoco.__version__}; a measurement copy of its code whose "
+                  "only change is the weld's `data`, 11 -> 12 values as MuJoCo 4 wants): how much of the disagreement "
+                  "is the MuJoCo version.", "",
+                  "| hand | grasps | its successes | agrees with itself on 3.3.2 | " + " | ".join(
+                      f"ours: {v}, agree" for v in VARIANTS) + " |", "|---|---|---|---|" + "---|" * len(VARIANTS)]
+        for hand, n, succ, same, by in mj4:
+            lines.append(f"| {hand} | {n} | {succ} | {_pct(same, n)} | " + " | ".join(_pct(by[v], n) for v in VARIANTS) + " |")
     lines += ["", "Peer cost: " + "; ".join(f"{h} {p} of {f} files evaluated, {w:.0f} s wall with {args.workers} workers"
                                            for h, f, p, w in timing) + ".", ""]
     if details:
