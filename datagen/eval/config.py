@@ -108,10 +108,6 @@ class EvalConfig(Config):
     # equals the full hold's on every measured row, for 48% of its hold steps.
     settle_checks: int = 2
     settle_safety: float = 12.0
-    # ... and the early pass's projected displacement must stay below this fraction of
-    # max_translation_m / max_rotation_deg (1: the thresholds themselves): a grasp near a threshold
-    # runs the full hold, which the thresholds alone decide.
-    settle_margin: float = 1.0
     threads: int = 1                               # >1: directions stepped by a thread pool
     # --- rejections before simulating and static metrics at the grasp pose ---
     max_pregrasp_penetration_m: float = 0.01       # deeper hand-object contact at the pregrasp: rejected
@@ -160,7 +156,6 @@ class EvalConfig(Config):
         _check(self.hold_steps % self.check_every == 0, f"{c}.hold_steps", "must be a multiple of check_every")
         _check(self.settle_checks >= 0 and self.settle_safety >= 1, f"{c}.settle_checks/settle_safety",
                "settle_checks must be >= 0 and settle_safety >= 1")
-        _check(0 < self.settle_margin <= 1, f"{c}.settle_margin", f"must be in (0, 1], got {self.settle_margin}")
         _check(self.min_touching_links >= 0 and self.epsilon_iters >= 0, f"{c}.min_touching_links/epsilon_iters",
                "must be >= 0")
         tasks = {}

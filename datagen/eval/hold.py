@@ -19,7 +19,7 @@ under its load (soft contacts), by ~0.01-0.3 mm and ~0.01-0.1 deg per check on r
 grasps, slowing down, and never comes fully to rest (the hand's joint velocities stay above 3e-3).
 A direction then passes once, at that many consecutive checks, its creep since the previous
 check, continued ``settle_safety`` times faster through every remaining check, would still stay
-below ``settle_margin`` times the failure thresholds; an object still accelerating (its creep growing) keeps being
+below the failure thresholds; an object still accelerating (its creep growing) keeps being
 simulated. A grasp that sits still and then gives way late in the hold (a stick-slip) is what
 it cannot see; the default safety keeps twice the margin such grasps needed on the measured
 rows (EvalConfig, benchmarks/results/eval.md), where its verdicts equal the full hold's.
@@ -154,8 +154,7 @@ def hold(scene: Scene, closed: mujoco.MjData, wrenches: np.ndarray, datas: list[
                 turned = float(np.degrees(quat_angle_np(d.xquat[b], last_quat[i])))
                 last_pos[i], last_quat[i] = d.xpos[b].copy(), d.xquat[b].copy()
                 left = (checks - 1 - k) * cfg.settle_safety  # the remaining checks, with a safety factor
-                slow = (t + left * moved < cfg.settle_margin * cfg.max_translation_m
-                        and r + left * turned < cfg.settle_margin * cfg.max_rotation_deg)
+                slow = t + left * moved < cfg.max_translation_m and r + left * turned < cfg.max_rotation_deg
                 still[i] = still[i] + 1 if slow else 0
                 if still[i] >= cfg.settle_checks:
                     status[i] = True

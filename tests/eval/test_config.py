@@ -42,7 +42,7 @@ def test_disturbance_is_minus_w_t_scaled():
 
 
 @pytest.mark.parametrize("bad, word", [
-    ({"timestep_s": 0}, "timestep_s"), ({"hold_steps": 510}, "check_every"), ({"settle_checks": -1}, "settle_checks"), ({"settle_safety": 0.5}, "settle_safety"), ({"settle_margin": 0}, "settle_margin"), ({"bogus": 1}, "unknown keys"),
+    ({"timestep_s": 0}, "timestep_s"), ({"hold_steps": 510}, "check_every"), ({"settle_checks": -1}, "settle_checks"), ({"settle_safety": 0.5}, "settle_safety"), ({"bogus": 1}, "unknown keys"),
     ({"cone": "round"}, "cone"), ({"contact_distance_m": 0.001}, "touch_distance_m"),
     ({"tasks": {"x": {"w_t": [0, 0, 0, 0, 0, 0]}}}, "non-zero"),
     ({"tasks": {"x": {"w_t": [1, 0, 0, 0, 0, 0], "joint": "ball"}}}, "joint"),
