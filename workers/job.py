@@ -370,6 +370,8 @@ class JobDir:
         for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
             (self.path / d).mkdir(parents=True, exist_ok=True)
         doc = {"config": cfg.to_dict(), "config_hash": cfg.hash(), "code_version": code_version(),
+               # the hand gains the verdicts follow, as resolved now (datagen/eval/protocol.py)
+               "eval_protocol": cfg.build_configs()[2].protocol,
                "packages": package_versions(), "host": socket.gethostname(),
                "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         atomic_write_text(p, json.dumps(doc, indent=1, sort_keys=True))

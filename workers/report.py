@@ -180,6 +180,23 @@ def _evaluation_line(overrides: dict, job_code: str) -> str:
             + ("" if code == job_code else f" (settings as code `{code}` resolves the job's `eval` overrides)"))
 
 
+def _protocol_line(doc: dict, hand: str) -> str:
+    """Whose hand gains the verdicts follow: job.json's ``eval_protocol`` (jobs before it: the
+    gains every hand had then, kp 5 and +-3)."""
+    from datagen.eval.protocol import PEER_GAINS
+
+    p = doc.get("eval_protocol")
+    if p is None:
+        return ("- hand gains: every hand at kp 5, force +-3 (a job made before `eval_protocol` was recorded; "
+                "`protocol: uniform` now)")
+    if p == "dexgraspbench" and hand in PEER_GAINS:
+        g = PEER_GAINS[hand]
+        limit = "no force limit" if g.force_limit is None else f"force +-{g.force_limit:g}"
+        return (f"- hand gains: protocol `dexgraspbench`, DexGraspBench's {hand} file (kp {g.kp:g}, kv {g.kv:g}, "
+                f"{limit}; {g.source}); verdicts against its evaluator: benchmarks/results/interop.md")
+    return f"- hand gains: protocol `{p}` (datagen/eval/protocol.py)"
+
+
 def write_report(path: str | Path, renders: int = 6) -> Path:
     """Write JOB/README.md; ``renders`` grasps are drawn (half successes, half failures)."""
     job = JobDir(path)
@@ -198,7 +215,7 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
           f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
           f"`object_path` points into `objects/` (relative to this directory)",
           f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()),
-          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), "",
+          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), _protocol_line(doc, cfg["hand"]), "",
           "## Outcome", ""]
     md += _table(["grasps", "successful", "success rate", "objects failed"],
                  [[s["grasps"], s["success"], f"{s['success_rate']:.1%}", fails.num_rows if fails is not None else 0]])

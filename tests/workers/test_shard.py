@@ -3,6 +3,8 @@ writes, the per-object time limit, determinism."""
 
 from __future__ import annotations
 
+import json
+
 import os
 from pathlib import Path
 
@@ -111,6 +113,12 @@ def test_status_and_report(done_job, capsys):
     assert f"grasps   {len(rows)}" in capsys.readouterr().out
     card = write_report(done_job.path, renders=1).read_text()
     assert "# Dataset card" in card and f"| process | {reason} | 1 |" in card
+    # the hand gains the verdicts follow: in job.json, each shard's eval config and the card
+    assert json.loads((done_job.path / "job.json").read_text())["eval_protocol"] == "dexgraspbench"
+    shard = next(done_job.shard_path(i) for i in range(3) if done_job.shard_path(i).is_file())
+    meta = pq.read_schema(shard).metadata
+    assert json.loads(meta[b"datagen.eval_config"])["protocol"] == "dexgraspbench"
+    assert "- hand gains: protocol `dexgraspbench`" in card
     pics = sorted((done_job.path / "renders").glob("*.png")) if (done_job.path / "renders").is_dir() else []
     if pics:  # an offscreen GL context was available
         assert f"![renders/{pics[0].name}]" in card
