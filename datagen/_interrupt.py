@@ -22,6 +22,9 @@ is still importing waits until `on_sigint` sets its policy: pending, it then end
 Native code that runs its own threads (SciPy's ``cKDTree.query(workers=-1)``) must not be left by
 a KeyboardInterrupt: its threads would go on with freed arrays and crash the interpreter as it
 exits. `sigint_deferred` holds a Ctrl-C until such a call has returned.
+
+SIGTERM stops a command as Ctrl-C does (`raise_on_sigterm`: a `Terminated` KeyboardInterrupt),
+with its own line and exit code 143.
 """
 
 from __future__ import annotations
@@ -32,7 +35,23 @@ import signal
 import threading
 from typing import Iterator
 
-__all__ = ["on_sigint", "sigint_blocked", "sigint_deferred"]
+__all__ = ["Terminated", "on_sigint", "raise_on_sigterm", "sigint_blocked", "sigint_deferred"]
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill PID``, a scheduler stopping the job) in a command's main thread: handled
+    like Ctrl-C (the command's cleanup runs, one line, no traceback), exit 143."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def raise_on_sigterm() -> None:
+    """In a command's main thread: SIGTERM raises `Terminated`. Called again after a library that
+    installs its own handler (Ray's core worker prints a native stack dump and exits 15)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
 
 
 @contextlib.contextmanager

@@ -78,5 +78,5 @@ def _prepare(args) -> int:
                       timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
     if args.results:
         write_results(results, args.results)
-    print(summarize(results))
+    print(summarize(results, args.results))
     return 0

@@ -20,6 +20,7 @@ class Reason(str, enum.Enum):
 
     MISSING_FILE = "missing_file"            # the mesh file does not exist
     NOT_A_FILE = "not_a_regular_file"        # a directory, device, FIFO or looping symlink
+    FILE_TOO_LARGE = "file_too_large"        # a file over its size cap (a mesh: ProcessConfig.max_mesh_bytes)
     UNREADABLE_MESH = "unreadable_mesh"      # the file is not a mesh the loader understands
     EMPTY_MESH = "empty_mesh"                # no vertices or no faces
     NON_FINITE = "non_finite_vertices"       # NaN or inf coordinates
