@@ -35,7 +35,7 @@ import signal
 import threading
 from typing import Iterator
 
-__all__ = ["Terminated", "on_sigint", "raise_on_sigterm", "sigint_blocked", "sigint_deferred"]
+__all__ = ["Terminated", "on_sigint", "raise_on_sigterm", "sigint_blocked", "sigint_deferred", "was_terminated"]
 
 
 class Terminated(KeyboardInterrupt):
@@ -43,15 +43,25 @@ class Terminated(KeyboardInterrupt):
     like Ctrl-C (the command's cleanup runs, one line, no traceback), exit 143."""
 
 
+_terminated = threading.Event()
+
+
 def _terminate(signum, frame):
+    _terminated.set()
     raise Terminated
 
 
 def raise_on_sigterm() -> None:
     """In a command's main thread: SIGTERM raises `Terminated`. Called again after a library that
-    installs its own handler (Ray's core worker prints a native stack dump and exits 15)."""
+    installs its own handler (``ray.init`` makes it ``sys.exit(15)``)."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate)
+
+
+def was_terminated() -> bool:
+    """Whether SIGTERM arrived: native code that catches the interrupt and raises its own
+    KeyboardInterrupt (Ray's ``ray.wait``) loses the `Terminated` type."""
+    return _terminated.is_set()
 
 
 @contextlib.contextmanager

@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. A domain error is one line and exit 2; Ctrl-C is one line
     (`interrupted_line`) and exit 130, the shell's code for SIGINT (SIGTERM: "terminated", 143). Outputs are written atomically
     (`datagen._atomic`), so an interrupted command leaves no half-written file."""
-    from datagen._interrupt import Terminated, raise_on_sigterm
+    from datagen._interrupt import Terminated, raise_on_sigterm, was_terminated
     from datagen.gl import drop_unusable
 
     install_log_handler()
@@ -152,10 +152,11 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (`Terminated`)
         line = interrupted_line(args, argv)
-        if isinstance(exc, Terminated):
+        terminated = isinstance(exc, Terminated) or was_terminated()
+        if terminated:
             line = line.replace(": interrupted;", ": terminated (SIGTERM);", 1)
         print("\n" + line, file=sys.stderr)  # after a progress bar's line
-        return 143 if isinstance(exc, Terminated) else 130
+        return 143 if terminated else 130
     except BrokenPipeError:  # stdout closed early (`datagen hands | head -1`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit's flush
         return 141  # the shell's code for SIGPIPE, as a command killed by it

@@ -184,7 +184,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
     n_targets = sum(len(d["scales"]) for d in entries)
-    progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets)
+    progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets,
+                             node=_node_id())
     timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
     fails: list[dict] = []
 
@@ -266,14 +267,14 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
 
 
 class ShardProgress:
-    """A running shard's progress, ``{"done": units, "total": units}`` in a small JSON file the
+    """A running shard's progress, ``{"done": units, "total": units, "node": Ray node id}`` in a small JSON file the
     driver polls (written atomically, at most every 0.5 s). Units: one per object processed and
     one per object whose target is built; then per task, as many for the synthesis of the batch
     (moving with its iterations) and as many again for its evaluation as the shard has objects x
     scales. A rough but steady measure of work: synthesis and evaluation dominate a shard."""
 
-    def __init__(self, path: Path, total: float):
-        self.path, self.total, self.done, self._last = path, float(total), 0.0, 0.0
+    def __init__(self, path: Path, total: float, node: str = ""):
+        self.path, self.total, self.done, self._last, self.node = path, float(total), 0.0, 0.0, node
         self._write(force=True)
 
     def add(self, n: float) -> None:
@@ -291,6 +292,7 @@ class ShardProgress:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             # polled, rewritten every 0.5 s: atomic but not flushed to disk
-            atomic_write_text(self.path, json.dumps({"done": round(self.done, 3), "total": self.total}), fsync=False)
+            atomic_write_text(self.path, json.dumps({"done": round(self.done, 3), "total": self.total, "node": self.node}),
+                              fsync=False)
         except OSError:  # progress is a convenience: never fail a shard for it
             pass

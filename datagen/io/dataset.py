@@ -36,7 +36,8 @@ def shard_paths(job_dir: str | Path) -> list[Path]:
     if found.problems:
         i, why = min(found.problems.items())
         path, _, reason = why.partition(": ")
-        more = f" ({len(found.problems) - 1} more shard(s) too: `datagen verify {job}`)" if len(found.problems) > 1 else ""
+        more = (f"; and {len(found.problems) - 1} more shard(s) (`datagen verify {job}` lists them)"
+                if len(found.problems) > 1 else "")
         raise ShardError(job / path, reason + more, redo_remedy(job))
     return list(found.shard_files(job).values())
 
