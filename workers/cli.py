@@ -33,7 +33,7 @@ def register_run(sub: argparse._SubParsersAction) -> None:
                         "worker slots when the job is created, e.g. 3 for the default 6 objects on 2 cores")
     p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
-    p.add_argument("--num-cpus", type=_positive_int, default=None, help="local Ray CPUs (default: all cores)")
+    p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores; at least 1)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     p.add_argument("--object-timeout", type=float, default=None, metavar="SECONDS",
                    help="per-object processing limit (JobConfig.object_timeout_s, default 300); an execution "
@@ -55,16 +55,6 @@ def _per_shard(value: str):
         return int(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer or 'auto', got {value!r}") from None
-
-
-def _positive_int(value: str) -> int:
-    try:
-        n = int(value)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value!r}")
-    return n
 
 
 def _renamed_scale(value: str):

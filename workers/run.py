@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -135,6 +136,15 @@ def _ray_temp_dir(job: JobDir) -> tuple[str, bool]:
     return str(short), True
 
 
+class _DropNotice(logging.Filter):
+    def __init__(self, prefix: str) -> None:
+        super().__init__()
+        self.prefix = prefix
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(self.prefix)
+
+
 def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | None:
     """Start the job's local Ray: every core (or ``num_cpus``), no dashboard, its temp dir private
     (`_ray_temp_dir`), every port on the loopback interface. Returns the temp dir to remove at the
@@ -153,10 +163,14 @@ def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | 
     single = getattr(constants, "ENABLE_RAY_CLUSTER", None)
     if single is not None:
         constants.ENABLE_RAY_CLUSTER = False
+    notice = logging.getLogger("ray._private.authentication.authentication_token_setup")
+    quiet = _DropNotice("Token authentication is enabled")  # the default, said at every start; a warning
+    notice.addFilter(quiet)                                   # that it is disabled still shows
     try:
         ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
                  _node_ip_address=LOOPBACK, log_to_driver=False, configure_logging=False)
     finally:
+        notice.removeFilter(quiet)
         if single is not None:
             constants.ENABLE_RAY_CLUSTER = single
     os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
