@@ -132,8 +132,9 @@ def interrupted_line(args: argparse.Namespace | None, argv: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. A domain error is one line and exit 2; Ctrl-C is one line
-    (`interrupted_line`) and exit 130, the shell's code for SIGINT (SIGTERM: "terminated", 143). Outputs are written atomically
-    (`datagen._atomic`), so an interrupted command leaves no half-written file."""
+    (`interrupted_line`) and exit 130, the shell's code for SIGINT (SIGTERM: "terminated", 143).
+    Outputs are written atomically (`datagen._atomic`), so an interrupted command leaves no
+    half-written file."""
     from datagen._interrupt import Terminated, raise_on_sigterm, was_terminated
     from datagen.gl import drop_unusable
 

@@ -31,8 +31,8 @@ from datagen._interrupt import raise_on_sigterm
 from datagen.io import integrity
 from datagen.io.layout import JOB_JSON
 
-from .job import (AUTO, JobConfig, JobDir, JobError, JobIOError, code_version, package_versions, shard_size, shard_slices,
-                  writing)
+from .job import (AUTO, JobConfig, JobDir, JobError, JobIOError, code_version, package_versions, shard_size,
+                  shard_slices, writing)
 from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
@@ -315,7 +315,10 @@ def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: 
     if cfg.objects_per_shard != AUTO:
         return cfg, False
     if (job.path / JOB_JSON).is_file():
-        stored = job.read_job().get("config", {}).get("objects_per_shard")
+        try:
+            stored = job.read_job().get("config", {}).get("objects_per_shard")
+        except JobError:  # unreadable: the ledger records it too (`JobDir.init` may then rewrite job.json)
+            stored = next((e.get("objects_per_shard") for e in job.audit().finished.values()), None)
         if isinstance(stored, int) and not isinstance(stored, bool) and stored >= 1:
             return dataclasses.replace(cfg, objects_per_shard=stored), False
         # no number recorded (not a job of this code): resolve as for a new job; JobDir.init then

@@ -260,7 +260,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
                "wall_s": round(time.perf_counter() - t_start, 3),
                "started_unix_s": round(started, 3), "finished_unix_s": round(time.time(), 3),
                "cpu_s": round(time.process_time() - cpu_start, 3),  # this process (not the CoACD children)
-               "node": _node_id(), "seed": shard_seed(cfg, index), "config_hash": cfg.hash(), "files": files}
+               "node": _node_id(), "seed": shard_seed(cfg, index), "config_hash": cfg.hash(),
+               "objects_per_shard": cfg.objects_per_shard, "files": files}
     job.record_finished(index, summary)
     progress.set(progress.total)
     return summary
@@ -292,7 +293,7 @@ class ShardProgress:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             # polled, rewritten every 0.5 s: atomic but not flushed to disk
-            atomic_write_text(self.path, json.dumps({"done": round(self.done, 3), "total": self.total, "node": self.node}),
-                              fsync=False)
+            state = {"done": round(self.done, 3), "total": self.total, "node": self.node}
+            atomic_write_text(self.path, json.dumps(state), fsync=False)
         except OSError:  # progress is a convenience: never fail a shard for it
             pass

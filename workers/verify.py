@@ -2,8 +2,9 @@
 
 `datagen status` checks sizes and footer row counts (cheap: no data read); this reads every
 listed file whole and compares its sha256 with the ledger's, and checks that the processed
-objects the rows name are in the job (`datagen.io.integrity.audit`, deep). What it finds is what a rerun of the job repairs: a shard
-that does not match is redone with its own seed, so with the same rows.
+objects the rows name are in the job (`datagen.io.integrity.audit`, deep). What it finds is what
+a rerun of the job repairs: a shard that does not match is redone with its own seed, so with the
+same rows.
 """
 
 from __future__ import annotations

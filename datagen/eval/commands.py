@@ -4,8 +4,8 @@ Both take a grasp table: a Parquet file (``datagen synth`` output, a job's shard
 file) or a job directory (its finished shards). Relative ``object_path`` values are resolved
 against the job directory for a job's shards, else against the table's directory
 (`datagen.eval.table.table_base`); they must lie inside that directory or the objects cache
-unless ``--allow-outside`` is given (`datagen.eval.table.check_object_paths`). ``datagen render`` picks the offscreen GL backend
-(`datagen.gl.select_backend`) before mujoco is imported.
+unless ``--allow-outside`` is given (`datagen.eval.table.check_object_paths`). ``datagen
+render`` picks the offscreen GL backend (`datagen.gl.select_backend`) before mujoco is imported.
 """
 
 from __future__ import annotations

@@ -10,5 +10,5 @@ from .dataset import POSE_COLUMNS, joint_names, open_dataset, read_job, shard_pa
 from .integrity import ShardError
 from .torch_dataset import GraspDataset
 
-__all__ = ["GraspDataset", "POSE_COLUMNS", "ShardError", "integrity", "joint_names", "layout", "open_dataset", "read_job",
-           "shard_paths"]
+__all__ = ["GraspDataset", "POSE_COLUMNS", "ShardError", "integrity", "joint_names", "layout", "open_dataset",
+           "read_job", "shard_paths"]

@@ -1,8 +1,9 @@
 """Reading a job's shards: an Arrow dataset, a table, and a torch Dataset for learning.
 
 Only finished shards (those with a ledger entry) are read, so a running or interrupted job
-shows a consistent subset; each is checked against what its entry records (`integrity`). The files are plain Parquet: pyarrow.dataset, pandas, DuckDB or
-Hugging Face datasets read ``JOB/shards/*.parquet`` without this module.
+shows a consistent subset; each is checked against what its entry records (`integrity`). The
+files are plain Parquet: pyarrow.dataset, pandas, DuckDB or Hugging Face datasets read
+``JOB/shards/*.parquet`` without this module.
 """
 
 from __future__ import annotations

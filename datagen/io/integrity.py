@@ -8,9 +8,10 @@ wrote, by path relative to the job directory::
 
 (a shard without rows lists no shard file). Readers trust only what the ledger lists, as it
 lists it: `audit` checks every entry, cheaply (each file's size and its Parquet footer's row
-count) or deeply (also its sha256, and that the processed objects its rows name are in the job). Every Parquet file is written with page checksums (CRC32 per
-page, `WRITE_OPTIONS`) and read with their verification on (`read_parquet`), so a flipped bit
-in a page is an error naming the file, never a wrong value. Entries written before the ledger
+count) or deeply (also its sha256, and that the processed objects its rows name are in the
+job). Every Parquet file is written with page checksums (CRC32 per page, `WRITE_OPTIONS`) and
+read with their verification on (`read_parquet`), so a flipped bit in a page is an error naming
+the file, never a wrong value. Entries written before the ledger
 held ``files`` are accepted as they are (`Audit.unrecorded`): nothing to check them against.
 
     a = audit(job_dir, deep=True)

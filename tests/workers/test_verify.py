@@ -50,7 +50,8 @@ def flip_bit_in(path: Path, column: str) -> int:
 def test_the_ledger_records_every_file_it_vouches_for(job):
     entry = json.loads(job.ledger_path(0).read_text())
     rec = entry["files"]["shards/part-00000.parquet"]
-    assert rec["bytes"] == job.shard_path(0).stat().st_size and rec["rows"] == pq.read_metadata(job.shard_path(0)).num_rows
+    assert rec["bytes"] == job.shard_path(0).stat().st_size
+    assert rec["rows"] == pq.read_metadata(job.shard_path(0)).num_rows
     assert rec["rows"] == entry["grasps"] == 2
     assert sorted(json.loads(job.ledger_path(2).read_text())["files"]) == ["failures/part-00002.parquet"]  # no rows
 
