@@ -25,7 +25,7 @@ from pathlib import Path
 from datagen.errors import DatagenError
 
 __all__ = ["CONFIG_BYTES", "HAND_SPEC_BYTES", "InputError", "JSON_BYTES", "MANIFEST_BYTES", "MANIFEST_LINE_BYTES",
-           "NOT_FOUND", "NOT_REGULAR", "NOT_TEXT", "TOO_LARGE", "UNREADABLE", "iter_lines", "open_regular",
+           "NOT_FOUND", "NOT_REGULAR", "NOT_TEXT", "TOO_LARGE", "UNREADABLE", "check_regular", "iter_lines", "open_regular",
            "read_bytes", "read_json", "read_text", "sha256_file"]
 
 CONFIG_BYTES = 1 << 20            #: job, processing, synthesis and evaluation configs, task YAMLs (a few kB)
@@ -89,6 +89,13 @@ def open_regular(path: str | Path, limit: int, what: str) -> tuple[int, int]:
         os.close(fd)
         raise
     return fd, st.st_size
+
+
+def check_regular(path: str | Path, limit: int, what: str) -> None:
+    """`InputError` if ``path`` is not a regular file of at most ``limit`` bytes (as `open_regular`,
+    nothing read): a command checks its arguments with it before its heavy imports."""
+    fd, _ = open_regular(path, limit, what)
+    os.close(fd)
 
 
 def read_bytes(path: str | Path, limit: int, what: str) -> bytes:

@@ -77,9 +77,12 @@ def sigint_blocked() -> Iterator[None]:
 
 def on_sigint(policy: str) -> None:
     """In a child process (its main thread), first thing: ``"die"`` or ``"ignore"`` on SIGINT (see
-    the module docstring), then unblock it."""
+    the module docstring), then unblock it. SIGTERM gets its default action back (a forked child
+    inherits the command's `raise_on_sigterm`, and ``Pool.terminate`` ends its workers with
+    SIGTERM: they must die quietly, not raise)."""
     if policy not in ("die", "ignore"):
         raise ValueError(f"on_sigint: policy must be 'die' or 'ignore', got {policy!r}")
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_DFL if policy == "die" else signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 

@@ -1,7 +1,8 @@
 """Bounded reads of a user's paths (`datagen._bounded`): a device, a FIFO, a socket or a folder is
 refused before a byte is read, at once; a file over its cap is refused from its size; memory stays
-bounded. And every command that takes such a path says so in one line (exit 2), under an address-
-space limit that turns a reader that reads on into a MemoryError instead of a host out of memory."""
+bounded. And every command that takes such a path says so in one line (exit 2), before its heavy
+imports, under an address-space limit that turns a reader that reads on into a MemoryError
+instead of a host out of memory."""
 
 from __future__ import annotations
 
@@ -80,16 +81,16 @@ def test_caps_missing_files_and_text(tmp_path):
             _bounded.read_json(tmp_path / "j.json", "ledger entry")
 
 
-def _cli(args: list[str], timeout_s: float = 240) -> tuple[int, str, int]:
-    """(exit code, stderr, peak RSS in KiB) of ``datagen ARGS`` in a child limited to 3 GiB of
-    address space (torch and Ray import within it)."""
+def _cli(args: list[str], timeout_s: float = 240) -> tuple[int, str]:
+    """(exit code, stderr) of ``datagen ARGS`` in a child limited to 3 GiB of address space (torch
+    and Ray import within it): a reader that reads a device on fails with a MemoryError there
+    instead of taking the machine's memory."""
     def limit():
         resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
 
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     proc = subprocess.run([sys.executable, "-m", "datagen.cli", *args], cwd=REPO, capture_output=True, text=True,
-                          timeout=timeout_s, preexec_fn=limit)
-    return proc.returncode, proc.stderr, max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before)
+                          timeout=timeout_s, preexec_fn=limit)  # a FIFO that hangs fails the test, not the suite
+    return proc.returncode, proc.stderr
 
 
 @pytest.mark.parametrize("what", ["/dev/zero", "a FIFO"])
@@ -111,11 +112,13 @@ def test_commands_refuse_devices_and_fifos_in_one_line(tmp_path, specials, what,
     assert not (tmp_path / "job").exists()
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("what,flag", [("/dev/zero", "--manifest"), ("a FIFO", "--config")])
-def test_a_fresh_process_refuses_them_within_bounded_memory(tmp_path, specials, what, flag):
+@pytest.mark.parametrize("what,args", [("/dev/zero", ["run", "--manifest"]), ("a FIFO", ["run", "--config"]),
+                                       ("a FIFO", ["manifest", "check"]), ("/dev/zero", ["prepare", "--manifest"])])
+def test_a_fresh_process_refuses_them_at_once_in_little_memory(tmp_path, specials, what, args):
     path = specials[what]
-    code, err, peak_kib = _cli(["run", flag, str(path), "--out", str(tmp_path / "job"), "--no-progress"])
+    extra = ["--out", str(tmp_path / "job"), "--no-progress"] if args[0] == "run" else []
+    t0 = time.perf_counter()
+    code, err = _cli([*args, str(path), *extra])
     assert code == 2 and len(err.strip().splitlines()) == 1 and KINDS[what] in err, err
-    assert peak_kib < 1 << 20  # < 1 GiB: the imports, not the file
+    assert time.perf_counter() - t0 < 5  # checked before the command's imports (torch, Ray): ~0.2 s, ~20 MiB
     assert not (tmp_path / "job").exists()

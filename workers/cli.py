@@ -63,7 +63,7 @@ def _renamed_scale(value: str):
 
 
 def _config(args):
-    from datagen.objects.config import read_yaml
+    from datagen.config import read_yaml
 
     from .job import JobConfig, JobError
 
@@ -119,7 +119,20 @@ def closing_summary(status: dict) -> str:
     return "\n".join(lines)
 
 
+def _check_inputs(args) -> None:
+    """--config and --manifest are regular files within their caps: a device or a FIFO is refused
+    at once, before the imports of a job (torch, Ray: seconds)."""
+    from datagen import _bounded
+    from datagen.objects.errors import check_manifest_file
+
+    if args.config:
+        _bounded.check_regular(args.config, _bounded.CONFIG_BYTES, "job config")
+    if args.manifest:
+        check_manifest_file(args.manifest)
+
+
 def _run(args) -> int:
+    _check_inputs(args)
     from .job import JobError
     from .run import run_job
     from .status import format_status

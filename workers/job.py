@@ -253,7 +253,7 @@ class JobConfig(Config):
     @classmethod
     def from_yaml(cls, path: str | Path) -> "JobConfig":
         """From a YAML mapping; tags, aliases and files over 1 MiB are refused (`read_yaml`)."""
-        from datagen.objects.config import read_yaml
+        from datagen.config import read_yaml
 
         try:
             data = read_yaml(path, "job config")

@@ -12,7 +12,7 @@ import enum
 
 from datagen.errors import DatagenError
 
-__all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError"]
+__all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError", "check_manifest_file"]
 
 
 class Reason(str, enum.Enum):
@@ -66,6 +66,24 @@ class MeshProcessingError(ObjectError):
 
 class ManifestError(ObjectError):
     """A manifest file or line is invalid."""
+
+    @classmethod
+    def of_input(cls, exc) -> "ManifestError":
+        """The error of a manifest file that cannot be read (a `datagen._bounded.InputError`)."""
+        reason = {"missing_file": Reason.MISSING_FILE, "file_too_large": Reason.FILE_TOO_LARGE,
+                  "not_text": Reason.MALFORMED_LINE}.get(exc.reason, Reason.NOT_A_FILE)
+        return cls(reason, exc.path, exc.detail)
+
+
+def check_manifest_file(path) -> None:
+    """`ManifestError` unless ``path`` is a regular file within the manifest cap (nothing read;
+    for commands, before their heavy imports)."""
+    from datagen import _bounded
+
+    try:
+        _bounded.check_regular(path, _bounded.MANIFEST_BYTES, "manifest")
+    except _bounded.InputError as exc:
+        raise ManifestError.of_input(exc) from None
 
 
 class SourceError(ObjectError):

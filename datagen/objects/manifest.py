@@ -69,9 +69,6 @@ def resolve_scales(scales: Iterable, factor: float, object_id: str) -> tuple[flo
         if float(s) not in out:
             out.append(float(s))
     return tuple(out)
-# a manifest file that cannot be read -> the reason of its ManifestError
-_INPUT_REASONS = {_bounded.NOT_FOUND: Reason.MISSING_FILE, _bounded.NOT_REGULAR: Reason.NOT_A_FILE,
-                  _bounded.TOO_LARGE: Reason.FILE_TOO_LARGE, _bounded.NOT_TEXT: Reason.MALFORMED_LINE}
 _FIELDS = {"id": str, "source": str, "path": str, "family": str, "sha256": str, "scales": list,
            "split": str}
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,199}$")
@@ -236,5 +233,5 @@ def load_manifest(path: str | Path, check_paths: bool = True) -> list[ManifestEn
             seen[e.id] = n
             entries.append(e)
     except _bounded.InputError as exc:
-        raise ManifestError(_INPUT_REASONS.get(exc.reason, Reason.NOT_A_FILE), exc.path, exc.detail) from None
+        raise ManifestError.of_input(exc) from None
     return entries
