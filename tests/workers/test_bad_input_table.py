@@ -241,7 +241,7 @@ COMMANDS = {
     "`--out` of a running job": lambda t, c, m: _locked(t, c),
     "Ctrl-C during `run`": lambda t, c, m: _interrupted(t, c, m),
     "Ctrl-C during `prepare`": lambda t, c, m: _interrupted_command(
-        t, c, m, ("datagen.objects.prepare", "prepare"), ["prepare", "--manifest", str(t / "m.jsonl")]),
+        t, c, m, ("datagen.objects.prepare", "prepare"), ["prepare", "--manifest", str(_file(t / "m.jsonl"))]),
     "Ctrl-C during `synth`": lambda t, c, m: _interrupted_command(
         t, c, m, ("datagen.pipeline.commands", "load_object"),
         ["synth", "--object", str(_box(t / "box.obj")), "--out", str(t / "g.parquet")]),
