@@ -184,21 +184,6 @@ def _eval_outside(tmp, capsys):
     return code, capsys.readouterr().err
 
 
-def _disk_full(tmp, capsys):
-    import subprocess
-
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    (tmp / "small").mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=96k", "tmpfs", str(tmp / "small")]).returncode:
-        pytest.skip("cannot mount a tmpfs here")
-    try:  # a long path: Ray's temp dir goes to /tmp, not onto the small disk
-        return _run(tmp, capsys, "--num-cpus", "1", "--cache", _CACHE["dir"],
-                    out=tmp / "small" / ("job" + "x" * 40))
-    finally:
-        subprocess.run(["umount", "-l", str(tmp / "small")], check=False)
-
-
 def _terminated(tmp, capsys, monkeypatch):
     from datagen._interrupt import Terminated
 
@@ -220,7 +205,6 @@ COMMANDS = {
     "a truncated shard": lambda t, c, m: _damaged(t, c, lambda j: _truncate(j.shard_path(0)), "status"),
     "an empty ledger entry": lambda t, c, m: _damaged(t, c, lambda j: j.ledger_path(0).write_text(""), "status"),
     "a truncated `job.json`": lambda t, c, m: _damaged(t, c, lambda j: _truncate(j.path / "job.json"), "status"),
-    "the disk under `--out` fills up": lambda t, c, m: _disk_full(t, c),
     "SIGTERM during `run`": lambda t, c, m: _terminated(t, c, m),
     "`run --hand nohand`": lambda t, c, m: _run(t, c, "--hand", "nohand"),
     "`run --tasks nope`": lambda t, c, m: _run(t, c, "--tasks", "nope"),
@@ -306,14 +290,14 @@ def _matches(quote: str, text: str) -> bool:
 
 
 def test_every_row_has_a_scenario_and_back():
-    assert set(table_rows()) == set(COMMANDS) | set(OBJECTS)
+    assert set(table_rows()) == set(COMMANDS) | set(OBJECTS) | set(ELSEWHERE)
 
 
-SLOW = {"the disk under `--out` fills up"}  # a job on Ray
+# rows a test elsewhere checks (with its job on Ray), by the same rules as test_command_row_is_true
+ELSEWHERE = {"the disk under `--out` fills up": "test_verify.py::test_a_full_disk_is_one_line_and_the_rerun_finishes"}
 
 
-@pytest.mark.parametrize("row", [pytest.param(r, marks=[pytest.mark.slow, pytest.mark.ray]) if r in SLOW else r
-                                 for r in sorted(COMMANDS)])
+@pytest.mark.parametrize("row", sorted(COMMANDS))
 def test_command_row_is_true(row, tmp_path, capsys, monkeypatch, cache_dir):
     _CACHE["dir"] = cache_dir
     cell = table_rows()[row]

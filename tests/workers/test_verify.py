@@ -150,9 +150,12 @@ def test_a_rerun_redoes_exactly_the_damaged_shards(job, pristine, mesh_source, c
 @pytest.mark.slow
 def test_a_full_disk_is_one_line_and_the_rerun_finishes(tmp_path, pristine, mesh_source, cache_dir, capsys):
     import os
+    import re
     import subprocess
 
     import yaml
+
+    from .test_bad_input_table import _matches, table_rows
 
     if os.geteuid() != 0:
         pytest.skip("mounting a small tmpfs needs root")
@@ -169,6 +172,8 @@ def test_a_full_disk_is_one_line_and_the_rerun_finishes(tmp_path, pristine, mesh
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"datagen run: error: cannot write the ") and str(out) in err[0]
         assert ": No space left on device (free space on the file system holding " in err[0], err
+        cell = table_rows()["the disk under `--out` fills up"]  # the README's row says so
+        assert cell.startswith("exit 1: ") and _matches(re.findall(r"`([^`]*)`", cell)[-1], err[0])
         found = JobDir(out).audit(deep=True)
         assert not found.problems and len(found.finished) < 3  # no half file counted as done
         subprocess.run(["mount", "-o", "remount,size=8m", str(small)], check=True)
