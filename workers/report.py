@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from datagen._atomic import atomic_write_text
+from datagen.io import integrity
 from schemas import column_table
 
-from .job import JobDir
+from .job import JobDir, JobError, JobIOError, writing
 from .status import job_status
 
 __all__ = ["pick_renders", "write_report"]
@@ -65,10 +65,14 @@ def _table(header: list[str], rows: list[list]) -> list[str]:
 
 
 def _read_rows(job: JobDir) -> pa.Table | None:
-    paths = [job.shard_path(i) for i in sorted(job.finished()) if job.shard_path(i).is_file()]
-    tables = [pq.read_table(p) for p in paths]
-    tables = [t for t in tables if t.num_rows]
-    return pa.concat_tables(tables) if tables else None
+    """Every row of the finished shards (`datagen.io.read_job`: each checked against the ledger,
+    page checksums verified), None before the first row."""
+    from datagen.io import read_job
+
+    try:
+        return read_job(job.path)
+    except FileNotFoundError:  # no finished shard with rows yet
+        return None
 
 
 def pick_renders(success: list[bool], objects: list[str], n: int) -> list[int]:
@@ -201,9 +205,18 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
     """Write JOB/README.md; ``renders`` grasps are drawn (half successes, half failures)."""
     job = JobDir(path)
     doc = job.read_job()
+    out = job.path / "README.md"
+    if not os.access(job.path, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise JobIOError(f"cannot write the dataset card {out}: the job directory is not writable",
+                         "run `datagen report` on a writable copy of the job (cp -r), or as its owner")
     s = job_status(job.path)
+    if s["damaged"]:
+        i, why = next(iter(s["damaged"].items()))
+        raise JobError(f"job {job.path}: shard {i} does not match its ledger entry ({why}); the card would "
+                       "miss its rows", integrity.redo_remedy(job.path))
     rows = _read_rows(job)
-    fails = pq.read_table(job.failures_path) if job.failures_path.is_file() else None
+    fails = (integrity.read_parquet(job.failures_path, remedy=integrity.redo_remedy(job.path))
+             if job.failures_path.is_file() else None)
     cfg = doc["config"]
     md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}")),
           f"# Dataset card: {job.path.name}", "",
@@ -275,6 +288,6 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
     else:
         md += [note, ""]
     md += ["## Config", "", "```json", json.dumps(cfg, indent=1, sort_keys=True), "```", ""]
-    out = job.path / "README.md"
-    atomic_write_text(out, "\n".join(md))
+    with writing(out, "the dataset card"):
+        atomic_write_text(out, "\n".join(md))
     return out

@@ -48,6 +48,9 @@ def _manifest_build(args) -> int:
 
 
 def _manifest_check(args) -> int:
+    from .errors import check_manifest_file
+
+    check_manifest_file(args.manifest)  # a device or a FIFO: refused before the imports below
     from .manifest import load_manifest
 
     print(f"{args.manifest}: {len(load_manifest(args.manifest))} objects, valid")
@@ -70,6 +73,13 @@ def register_prepare(sub: argparse._SubParsersAction) -> None:
 
 
 def _prepare(args) -> int:
+    from datagen import _bounded
+
+    from .errors import check_manifest_file
+
+    check_manifest_file(args.manifest)  # refused before the imports below
+    if args.config:
+        _bounded.check_regular(args.config, _bounded.CONFIG_BYTES, "processing config")
     from .config import ProcessConfig
     from .prepare import DEFAULT_TIMEOUT_S, prepare, summarize, write_results
 
@@ -78,5 +88,5 @@ def _prepare(args) -> int:
                       timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
     if args.results:
         write_results(results, args.results)
-    print(summarize(results))
+    print(summarize(results, args.results))
     return 0

@@ -69,15 +69,16 @@ def _synth(args) -> int:
 
     import pyarrow.parquet as pq
     import torch
-    import yaml
 
     from datagen._atomic import atomic_path
+    from datagen.config import read_yaml
     from datagen.hands import load_hand, pin_hand
     from datagen.pipeline import BatchObject, build_targets, synthesize_rows
     from datagen.synth import SynthConfig
     from datagen.tasks import load_task
 
-    cfg = SynthConfig.from_dict(yaml.safe_load(Path(args.config).read_text()) if args.config else {}, where=args.config or "defaults")
+    cfg = SynthConfig.from_dict(read_yaml(args.config, "synthesis config") if args.config else {},
+                                where=args.config or "defaults")
     from datagen.synth.config import FORCE_CLOSURE_SEEDS
 
     if args.seeds_per_grasp is None and args.config is None and args.task == "force_closure":

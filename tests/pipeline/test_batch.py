@@ -105,8 +105,8 @@ def test_synth_then_eval_commands_give_the_batch_rows(world, tmp_path):
     synth_args = ["--num", "2", "--iters", "150", "--seed", "3", "--scale", "0.08"]
     assert main(["synth", "--object", str(box.entry), "--cache", cache, "--out", str(tmp_path / "g.parquet"),
                  *synth_args]) == 0
-    assert main(["eval", str(tmp_path / "g.parquet"), "--config", str(tmp_path / "eval.yaml"),
-                 "--out", str(tmp_path / "e.parquet")]) == 0
+    assert main(["eval", str(tmp_path / "g.parquet"), "--config", str(tmp_path / "eval.yaml"), "--cache", cache,
+                 "--out", str(tmp_path / "e.parquet")]) == 0  # its rows name objects in that cache
     cli_rows = pq.read_table(tmp_path / "e.parquet").to_pylist()
     out = run_batch([BatchObject(box, (0.08,))], hand, ["force_closure"],
                     SynthConfig(iters=150, seeds_per_grasp=FORCE_CLOSURE_SEEDS), EvalConfig.from_dict(TINY_EVAL),

@@ -74,15 +74,20 @@ def test_same_config_same_rows(tmp_path, mesh_source, cache_dir, done_job):
 
 
 def test_failing_shard_write_leaves_no_partial_file(tmp_path, mesh_source, cache_dir, monkeypatch):
+    from workers.job import JobIOError
+
     real = shard_mod.pq.write_table
+    cfg = tiny_config(mesh_source)
+    run_all(tmp_path / "job", cfg, cache_dir, only=set())  # the job and its manifest, no shard yet
 
     def broken(table, where, **kw):
         real(table.slice(0, 1), where, **kw)  # something reaches the disk, then the write fails
-        raise OSError("disk full (simulated)")
+        raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(shard_mod.pq, "write_table", broken)
-    with pytest.raises(OSError, match="disk full"):
-        run_all(tmp_path / "job", tiny_config(mesh_source), cache_dir, only={0})
+    with pytest.raises(JobIOError, match=r"cannot write the Parquet file .*shards/part-00000.parquet: No space left "
+                                         r"on device \(free space on the file system holding .*shards"):
+        run_all(tmp_path / "job", cfg, cache_dir, only={0})
     job = JobDir(tmp_path / "job")
     assert not job.shard_path(0).exists()
     assert list((job.path / "shards").iterdir()) == []  # no temp file left either
