@@ -32,6 +32,7 @@ REGISTRARS: dict[str, str] = {
     "render": "datagen.eval.commands:register_render",
     "run": "workers.cli:register_run",
     "status": "workers.cli:register_status",
+    "verify": "workers.cli:register_verify",
     "report": "workers.cli:register_report",
     "export": "datagen.interop.commands:register_export",
     "import": "datagen.interop.commands:register_import",
@@ -132,11 +133,14 @@ def interrupted_line(args: argparse.Namespace | None, argv: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. A domain error is one line and exit 2; Ctrl-C is one line
-    (`interrupted_line`) and exit 130, the shell's code for SIGINT. Outputs are written atomically
-    (`datagen._atomic`), so an interrupted command leaves no half-written file."""
+    (`interrupted_line`) and exit 130, the shell's code for SIGINT (SIGTERM: "terminated", 143).
+    Outputs are written atomically (`datagen._atomic`), so an interrupted command leaves no
+    half-written file."""
+    from datagen._interrupt import Terminated, raise_on_sigterm, was_terminated
     from datagen.gl import drop_unusable
 
     install_log_handler()
+    raise_on_sigterm()
 
     drop_unusable()  # a MUJOCO_GL that would make `import mujoco` fail is dropped, with a warning
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -148,9 +152,13 @@ def main(argv: list[str] | None = None) -> int:
         except _domain_errors() as exc:
             print(f"datagen {args.command}: error: {exc}", file=sys.stderr)
             return 2
-    except KeyboardInterrupt:
-        print("\n" + interrupted_line(args, argv), file=sys.stderr)  # after a progress bar's line
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (`Terminated`)
+        line = interrupted_line(args, argv)
+        terminated = isinstance(exc, Terminated) or was_terminated()
+        if terminated:
+            line = line.replace(": interrupted;", ": terminated (SIGTERM);", 1)
+        print("\n" + line, file=sys.stderr)  # after a progress bar's line
+        return 143 if terminated else 130
     except BrokenPipeError:  # stdout closed early (`datagen hands | head -1`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit's flush
         return 141  # the shell's code for SIGPIPE, as a command killed by it

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # rank of each top-level part of `datagen`; a module may import only strictly lower ranks
 # (and its own package). The root `datagen/__init__.py` is the curated facade over all of them.
 RANK = {
-    "errors": 0,
+    "errors": 0, "_bounded": 0.5,  # bounded reads of user files: only errors below it, config above
     "config": 1, "_atomic": 1, "_interrupt": 1, "rotation": 1, "scatter": 1, "gl": 1,
     "wrench": 2, "hands": 2, "objects": 2,
     "tasks": 3, "io": 3,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -23,13 +24,15 @@ import time
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from schemas import arrow_schema
 
+from datagen._interrupt import raise_on_sigterm
+from datagen.io import integrity
 from datagen.io.layout import JOB_JSON
 
-from .job import AUTO, JobConfig, JobDir, JobError, code_version, package_versions, shard_size, shard_slices
+from .job import (AUTO, JobConfig, JobDir, JobError, JobIOError, code_version, package_versions, shard_size,
+                  shard_slices, writing)
 from .shard import _failure, run_shard, write_table_atomic
 
 __all__ = ["run_job", "prepare_manifest", "pin_job_hand", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
@@ -67,7 +70,8 @@ def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
             print(f"warning: manifest {cfg.manifest} has {len(entries)} objects, fewer than count {cfg.count}",
                   file=sys.stderr)
     else:
-        entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction, rejected=rejected)
+        entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction, rejected=rejected,
+                                 max_mesh_bytes=cfg.recipes()[0].process.max_mesh_bytes)
     rows: list[dict] = []
     for r in rejected:  # shard -1: before any shard
         _failure(rows, -1, r.id, "manifest", r.reason, r.message)
@@ -75,7 +79,8 @@ def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
     if not entries:
         raise JobError(f"job {job.path}: the manifest is empty (source {cfg.source!r}, manifest {cfg.manifest!r})"
                        + "".join(f"\n  {r.message}" for r in rejected[:5]))
-    write_manifest(entries, job.manifest_path)
+    with writing(job.manifest_path, "the job's manifest"):
+        write_manifest(entries, job.manifest_path)
     return entries
 
 
@@ -92,13 +97,16 @@ def pin_job_hand(job: JobDir, spec) -> Path:
         raise JobError(f"job {job.path}: {exc}") from None
 
 
-def merge_failures(job: JobDir) -> pa.Table:
-    """Concatenate the manifest's and the shards' failure files into ``failures.parquet``
-    (atomically)."""
+def merge_failures(job: JobDir, done: dict | None = None) -> pa.Table:
+    """Concatenate the manifest's failures and those of the finished shards (``done``, default
+    `JobDir.finished`; parts of unfinished shards are not theirs yet) into ``failures.parquet``
+    (atomically). A part that cannot be read is a `ShardError` naming it."""
     schema = arrow_schema("failures")
+    done = job.finished() if done is None else done
     files = ([job.manifest_failures_path] if job.manifest_failures_path.is_file() else [])
-    files += sorted((job.path / "failures").glob("part-*.parquet"))
-    parts = [pq.read_table(p) for p in files]
+    files += [job.shard_failures_path(i) for i in sorted(done) if job.shard_failures_path(i).is_file()]
+    remedy = integrity.redo_remedy(job.path)
+    parts = [integrity.read_parquet(p, remedy=remedy) for p in files]
     table = pa.concat_tables([p.cast(schema) for p in parts]) if parts else schema.empty_table()
     write_table_atomic(table, job.failures_path)
     return table
@@ -109,7 +117,7 @@ def retryable_shards(job: JobDir, done: dict) -> list[int]:
     out = []
     for i in sorted(done):
         fp = job.shard_failures_path(i)
-        if fp.is_file() and any(r not in FINAL_REASONS for r in pq.read_table(fp, columns=["reason"])["reason"]
+        if fp.is_file() and any(r not in FINAL_REASONS for r in integrity.read_parquet(fp, ["reason"])["reason"]
                                 .to_pylist()):
             out.append(i)
     return out
@@ -141,6 +149,15 @@ def _ray_temp_dir(job: JobDir) -> tuple[str, bool]:
     return str(short), True
 
 
+class _DropNotice(logging.Filter):
+    def __init__(self, prefix: str) -> None:
+        super().__init__()
+        self.prefix = prefix
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(self.prefix)
+
+
 def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | None:
     """Start the job's local Ray: every core (or ``num_cpus``), no dashboard, its temp dir private
     (`_ray_temp_dir`), every port on the loopback interface. Returns the temp dir to remove at the
@@ -159,10 +176,14 @@ def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | 
     single = getattr(constants, "ENABLE_RAY_CLUSTER", None)
     if single is not None:
         constants.ENABLE_RAY_CLUSTER = False
+    notice = logging.getLogger("ray._private.authentication.authentication_token_setup")
+    quiet = _DropNotice("Token authentication is enabled")  # the default, said at every start; a warning
+    notice.addFilter(quiet)                                   # that it is disabled still shows
     try:
         ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
                  _node_ip_address=LOOPBACK, log_to_driver=False, configure_logging=False)
     finally:
+        notice.removeFilter(quiet)
         if single is not None:
             constants.ENABLE_RAY_CLUSTER = single
     os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
@@ -205,6 +226,8 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
 
     from .status import job_status
 
+    if num_cpus is not None and (isinstance(num_cpus, bool) or not isinstance(num_cpus, int) or num_cpus < 1):
+        raise JobError(f"--num-cpus must be an integer >= 1 (CPUs of the local Ray cluster), got {num_cpus!r}")
     hand = cfg.check_runnable()
     job = JobDir(out)
     _check_out(job.path)
@@ -216,6 +239,8 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         raise JobError(f"--out {job.path}: cannot create the job directory: {exc.strerror}") from None
     connected = False
     try:
+        for p in job.clean_temp():
+            log(f"removed {p.relative_to(job.path)}, left by an interrupted run")
         cfg, connected = _resolve_layout(cfg, job, address, num_cpus)
         resumed = job.init(cfg)
         doc = job.read_job()
@@ -227,7 +252,7 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
                 _discard_new_job(job, remove_dir=not existed)
             raise
         slices = shard_slices(len(entries), cfg.objects_per_shard)
-        done = job.finished()
+        done = _finished_or_redo(job, log)
         retry = retryable_shards(job, done) if retry_failed else []
         for i in retry:  # unfinished until rerun: readers never see old and new files mixed
             job.ledger_path(i).unlink(missing_ok=True)
@@ -255,6 +280,17 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         job.unlock()
 
 
+def _finished_or_redo(job: JobDir, log) -> dict[int, dict]:
+    """The finished shards whose files match their ledger entry to the sha256 (`JobDir.audit`,
+    deep); a shard whose file is missing, truncated or changed, or whose entry cannot be read,
+    loses its entry (said, with why) and is redone: its seed is fixed, so are its rows."""
+    found = job.audit(deep=True)
+    for i, why in sorted(found.problems.items()):
+        log(f"shard {i}: {why}; redoing it")
+        job.ledger_path(i).unlink(missing_ok=True)
+    return found.finished
+
+
 def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> tuple[int, bool, bool]:
     """(shard tasks that can run at once, whether this connected to a Ray cluster to count them,
     whether the shards get GPUs).
@@ -269,8 +305,9 @@ def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> t
     connected = False
     if address and address != "local":
         if not ray.is_initialized():
-            ray.init(address=address, log_to_driver=False)
+            _connect(ray, address)
             connected = True
+            raise_on_sigterm()
         res = ray.cluster_resources()
         cpus, gpus = res.get("CPU", 1.0), res.get("GPU", 0)
     else:
@@ -292,7 +329,10 @@ def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: 
     if cfg.objects_per_shard != AUTO:
         return cfg, False
     if (job.path / JOB_JSON).is_file():
-        stored = job.read_job().get("config", {}).get("objects_per_shard")
+        try:
+            stored = job.read_job().get("config", {}).get("objects_per_shard")
+        except JobError:  # unreadable: the ledger records it too (`JobDir.init` may then rewrite job.json)
+            stored = next((e.get("objects_per_shard") for e in job.audit().finished.values()), None)
         if isinstance(stored, int) and not isinstance(stored, bool) and stored >= 1:
             return dataclasses.replace(cfg, objects_per_shard=stored), False
         # no number recorded (not a job of this code): resolve as for a new job; JobDir.init then
@@ -366,12 +406,15 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
     started = False
     for i in todo:  # a killed run's progress is stale
         job.progress_path(i).unlink(missing_ok=True)
+    reaper = None
     if not ray.is_initialized():
         if address and address != "local":  # "local": Ray's name for a new local cluster
-            ray.init(address=address, log_to_driver=False)
+            _connect(ray, address)
         else:
             private_tmp = start_local_ray(ray, job, num_cpus, log)
+            reaper = _start_reaper(ray)
         started = True
+    raise_on_sigterm()  # again: Ray's core worker replaced the handler with one that dumps native stacks
     try:
         gpus = cfg.gpus_per_shard if ray.cluster_resources().get("GPU", 0) > 0 else 0
         task = ray.remote(run_shard).options(num_cpus=cfg.cpus_per_shard, num_gpus=gpus, max_retries=TASK_RETRIES,
@@ -401,6 +444,13 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
                     s = ray.get(ref)
                     grasps, ok = grasps + s["grasps"], ok + s["success"]
                 except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
+                    cause = getattr(exc, "cause", None)
+                    if isinstance(cause, JobIOError):  # a full disk: every other shard would fail the same way
+                        for r in pending:
+                            ray.cancel(r, force=True)
+                        if bar is not None:
+                            bar.close()
+                        raise cause from None
                     errors[i] = error_line(exc)
                     log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
                 finished_objects += slices[i][1] - slices[i][0]
@@ -416,5 +466,28 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
     finally:
         if started:
             stop_local_ray(ray)  # a driver connected to a cluster owns no Ray process: plain ray.shutdown()
+        if reaper is not None:
+            reaper.close()
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)
+
+
+def _start_reaper(ray):
+    """The reaper of the local cluster just started (`workers.reaper`: it dies with this driver,
+    even a SIGKILLed one), or None where Ray does not say its session directory."""
+    from .reaper import start_reaper
+
+    node = getattr(getattr(getattr(ray, "_private", None), "worker", None), "_global_node", None)
+    try:
+        return start_reaper(node.get_session_dir_path())
+    except Exception:  # noqa: BLE001 - another Ray version: only ray.shutdown stops the cluster
+        return None
+
+
+def _connect(ray, address: str) -> None:
+    """Join the Ray cluster at ``address`` (`JobError` naming it when none answers)."""
+    try:
+        ray.init(address=address, log_to_driver=False)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise JobError(f"--address {address}: cannot connect to a Ray cluster there ({error_line(exc)})",
+                       "start it with `ray start --head`, or pass the address `ray status` names") from None

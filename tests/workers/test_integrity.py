@@ -15,6 +15,7 @@ import pytest
 import trimesh
 
 from datagen import cli
+from datagen.io import ShardError, integrity
 from schemas import SchemaError, check_version, columns
 from workers.job import JobConfig, JobDir
 from workers.run import _ray_temp_dir, prepare_manifest
@@ -129,6 +130,11 @@ def test_shard_metadata_progress_and_every_shard_schema(tmp_path, mesh_source, c
     meta = dict(t.schema.metadata)
     meta[b"datagen.schema_version"] = b"99"
     pq.write_table(t.replace_schema_metadata(meta), job.shard_path(1))
+    with pytest.raises(ShardError, match=r"part-00001.parquet: (truncated|changed size): .* bytes, the ledger "):
+        open_dataset(job.path)  # a file the ledger does not vouch for
+    entry = json.loads(job.ledger_path(1).read_text())
+    entry["files"]["shards/part-00001.parquet"] = integrity.file_record(job.shard_path(1))
+    job.record_finished(1, entry)  # as if another code version had written it
     with pytest.raises(SchemaError, match="part-00001"):
         open_dataset(job.path)
     # `datagen eval` of a grasps table writes an `evaluated` table
