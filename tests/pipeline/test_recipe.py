@@ -54,8 +54,13 @@ def test_nested_mappings_merge_key_by_key_and_presets_differ_only_where_they_say
 
 
 def test_the_squeeze_is_computed_for_the_evaluations_actuator_gain():
+    from datagen.eval.protocol import PEER_GAINS
+
     r = resolve("shadow", config={"eval": {"actuator_kp": 3.0}})
     assert r.eval.actuator_kp == 3.0 and r.synth.squeeze_kp == 3.0
+    # the peer's gains for a hand it shares, under its protocol (the default); uniform: actuator_kp
+    assert resolve("leap").synth.squeeze_kp == PEER_GAINS["leap"].kp == 3.0
+    assert resolve("leap", config={"eval": {"protocol": "uniform"}}).synth.squeeze_kp == 5.0
     with pytest.raises(ConfigError, match="actuator_kp"):
         resolve("shadow", config={"synth": {"squeeze_kp": 3.0}})
 
