@@ -1,20 +1,8 @@
 """A job directory: its config, lock, manifest slice, shard layout and ledger of finished shards.
 
-Layout (names are the constants below; paths relative to the job directory)::
-
-    job.json                  the full JobConfig, its hash, code and package versions, created_at
-    manifest.jsonl            the manifest slice of this job (objects in shard order)
-    shards/part-NNNNN.parquet grasp rows of shard N (`evaluated` schema), written to a temp name
-                              and renamed; absent for a finished shard without rows
-    failures/part-NNNNN.parquet  failed objects/stages of shard N (`failures` schema)
-    failures.parquet          all failures (merged at the end of a run, and by `datagen status`)
-    objects/<entry>/          processed objects the rows refer to (hard links into the cache)
-    failures/manifest.parquet objects of the source that the manifest cannot hold (stage `manifest`)
-    ledger/part-NNNNN.json    written last for a finished shard: its counts and timings
-    hands/<name>.yaml         the job's hand spec, pinned with its asset's hash (`workers.run.pin_job_hand`)
-    progress/part-NNNNN.json  a running shard's progress (polled by the driver)
-    .lock                     flock held by the running driver
-    ray/                      Ray's temp dir when the path is short enough (else /tmp/dg-ray-*)
+The directory's layout is `datagen.io.layout`'s (one owner: the readers share it); job.json here
+records the full JobConfig, its resolved recipes and hash, code and package versions. Ray's temp
+dir is ``ray/`` when the path is short enough (else /tmp/dg-ray-*, `workers.cluster`).
 
 A job is resumable: re-running the same config skips the shards with a ledger entry and redoes
 the others (their outputs are overwritten atomically). A different config is refused; the
@@ -48,15 +36,13 @@ from datagen.objects.manifest import NATIVE
 from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
 from datagen.pipeline.recipe import DEFAULT_PRESET, resolve
-from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
-                               SHARD_NAME, SHARDS_DIR)
+from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, MANIFEST_FAILURES,
+                               OBJECTS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
 
 __all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "JobIOError", "code_version",
            "package_versions", "shard_size", "shard_slices", "writing"]
 
 
-PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running shard's progress
-MANIFEST_FAILURES = "manifest.parquet"  # failures/manifest.parquet: objects the manifest could not hold
 
 
 class JobError(DatagenError, RuntimeError):
@@ -186,7 +172,8 @@ class JobConfig(Config):
         try:
             self.recipes()  # validates the settings now, not in a worker
         except (ValueError, TypeError) as exc:
-            self.check_tasks()  # an unknown task is named with the valid ones
+            if not self._inputs_readable():
+                return  # a task or hand spec this machine cannot read: `check_runnable` names it
             raise JobError(f"JobConfig: {exc}") from None
 
     def recipes(self) -> list:
@@ -217,6 +204,18 @@ class JobConfig(Config):
             raise JobError(str(exc)) from None
         self.check_tasks()
         return hand
+
+    def _inputs_readable(self) -> bool:
+        """Whether every task loads and the hand is a built-in name or an existing spec file."""
+        from datagen.hands import BUILTIN_HANDS
+        from datagen.tasks import load_task
+
+        try:
+            for t in self.tasks:
+                load_task(t)
+        except Exception:  # noqa: BLE001 - any task problem: the inputs are not readable here
+            return False
+        return self.hand in BUILTIN_HANDS or Path(self.hand).is_file()
 
     def check_tasks(self) -> None:
         """Refuse (JobError) a task that cannot be loaded: an unknown name with the valid ones, a

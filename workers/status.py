@@ -7,8 +7,6 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-import pyarrow.parquet as pq
-
 from .job import JobDir, shard_slices
 
 __all__ = ["STAGES", "job_status", "format_status"]
@@ -45,7 +43,7 @@ def job_status(path: str | Path) -> dict:
     if job.manifest_failures_path.is_file():
         f = read_parquet(job.manifest_failures_path, ["stage", "reason"])
         failures.update(f"{s}:{r}" for s, r in zip(f["stage"].to_pylist(), f["reason"].to_pylist()))
-    from .run import retryable_shards
+    from .finished import retryable_shards
 
     for i, entry in sorted(done.items()):
         p, fp = job.shard_path(i), job.shard_failures_path(i)

@@ -17,7 +17,8 @@ import trimesh
 
 from datagen import cli
 from workers.job import JobDir
-from workers.run import merge_failures, prepare_manifest
+from workers.finished import merge_failures
+from workers.setup import prepare_manifest
 
 from .conftest import tiny_config
 from .test_shard import run_all

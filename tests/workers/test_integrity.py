@@ -18,7 +18,8 @@ from datagen import cli
 from datagen.io import ShardError, integrity
 from schemas import SchemaError, check_version, columns
 from workers.job import JobConfig, JobDir
-from workers.run import _ray_temp_dir, prepare_manifest
+from workers.cluster import _ray_temp_dir
+from workers.setup import prepare_manifest
 
 from .conftest import TINY_EVAL, comparable_rows, tiny_config
 from .test_shard import run_all
@@ -213,7 +214,7 @@ def test_an_unpicklable_shard_error_keeps_its_cause(tmp_path, mesh_source, monke
 
 
 def test_a_ray_task_error_becomes_one_clean_line():
-    from workers.run import error_line
+    from workers.cluster import error_line
 
     class FakeRayTaskError(Exception):  # what ray.get raises: a traceback with colours, and the cause
         def __init__(self, cause):

@@ -20,7 +20,8 @@ import pytest
 import yaml
 
 from workers.job import JobDir, JobError
-from workers.run import run_job, start_local_ray, stop_local_ray
+from workers.cluster import start_local_ray, stop_local_ray
+from workers.run import run_job
 
 from .conftest import comparable_rows, tiny_config
 from .test_shard import run_all

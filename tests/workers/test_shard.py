@@ -14,7 +14,8 @@ import pytest
 import workers.shard as shard_mod
 from schemas import arrow_schema, check_version
 from workers.job import JobConfig, JobDir, shard_slices
-from workers.run import merge_failures, prepare_manifest
+from workers.finished import merge_failures
+from workers.setup import prepare_manifest
 from workers.shard import run_shard
 
 from .conftest import comparable_rows, tiny_config
