@@ -15,6 +15,7 @@ __all__ = ["STAGES", "job_status", "format_status"]
 STAGES = {
     "manifest": "enumerating the source: the object could not be a manifest entry",
     "process": "mesh checks, repair, normalization and CoACD convex decomposition (cached per mesh)",
+    "observe": "the object observations: surface points, depth images from the cameras (observations/)",
     "target": "the synthesis target: signed-distance grid and hull samples of the object",
     "synth": "grasp synthesis (the wrench-space optimization), one batch per shard and task",
     "eval": "MuJoCo hold test of every grasp",
