@@ -133,3 +133,24 @@ def test_mujoco_rows_agree_with_ray_cast_rows_in_a_worker(mug, rows):
             else:  # the same visible surface: each MuJoCo point within a pixel's footprint of the ray cast's
                 d = np.linalg.norm(va[:, None, :] - vb[None, :, :], axis=2).min(axis=1)
                 assert np.median(d) < 2 * CFG.camera_distance_m / 48
+
+
+def test_without_gl_auto_casts_rays_and_mujoco_is_refused_in_one_line(monkeypatch):
+    import datagen.gl
+    from datagen.gl import GLUnavailable
+    from datagen.objects import observations
+    from workers.job import JobConfig, JobError
+
+    def no_gl():
+        raise GLUnavailable("no offscreen OpenGL backend works here: egl: libEGL not found")
+
+    monkeypatch.setattr(datagen.gl, "select_backend", no_gl)
+    monkeypatch.setattr(observations, "_resolved", {})
+    assert resolve_renderer("auto") == "raycast" and resolve_renderer("raycast") == "raycast"
+    with pytest.raises(GLUnavailable):
+        resolve_renderer("mujoco")
+    JobConfig(observations={"views": 2}).check_observations()  # auto: fine
+    with pytest.raises(JobError) as info:
+        JobConfig(observations={"views": 2, "renderer": "mujoco"}).check_observations()
+    msg = str(info.value)
+    assert "\n" not in msg and "observations.renderer is mujoco" in msg and "libEGL not found" in msg
