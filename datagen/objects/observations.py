@@ -9,14 +9,15 @@ surface sample and the camera directions are the object's (the same at every sca
 images are the scale's. Everything random is drawn from the job's seed and the object's id, so the
 same job gives the same rows (renders included, on the same machine and Mesa build).
 
-    rows = observe_object(processed, scales=(0.06, 0.08), cfg=ObservationConfig(views=4), seed=0)
+    rows = observe_object(processed, scales=(0.06, 0.08), cfg=ObservationConfig(), seed=0)
     rows = observe_isolated(...)   # the same, in a worker process with a time limit and a GL backend
 
 The depth images come from MuJoCo's renderer, which needs an offscreen OpenGL backend
 (``MUJOCO_GL``, `datagen.gl`); where none works, ``renderer: auto`` (the default) casts the same
-cameras' pixel rays with trimesh instead (`datagen.objects.views.raycast_depth`, within 1e-4 of
-the camera distance), and each row names the renderer that made it (``depth_renderer``). With ``views: 0``
-nothing is rendered. Cost on this project's 2-core machine: docs/learning.md.
+cameras' pixel rays with trimesh instead (`datagen.objects.views.raycast_depth`: the same pixels
+within 1e-4 of the camera distance, but at occluding edges; slower), and each row names the
+renderer that made it (``depth_renderer``). With ``views: 0`` nothing is rendered. Cost on this
+project's 2-core machine: docs/learning.md.
 """
 
 from __future__ import annotations
@@ -52,8 +53,9 @@ class ObservationConfig(Config):
     from the job's seed and the object's id."""
 
     points: int = 2048               #: surface points (with normals) per object and scale; 0 with views 0: no
-                                     #: observations at all (~48 KiB per row at 2048)
-    views: int = 0                   #: single-view depth clouds per object and scale (0: none)
+                                     #: observations at all
+    views: int = 4                   #: single-view depth clouds per object and scale (0: none); the defaults
+                                     #: take ~75 KiB per object and scale on disk
     renderer: str = "auto"           #: depth images: mujoco (needs an offscreen GL: MUJOCO_GL=egl or osmesa,
                                      #: `python -m datagen.gl`), raycast (trimesh, no GL), auto (mujoco where
                                      #: a GL backend works, else raycast)

@@ -102,6 +102,7 @@ def test_mujoco_and_raycast_agree_on_a_mesh_from_random_cameras():
     # pixel centres on a silhouette edge may fall either side: at most a few per view differ
     assert (seen_a != seen_b).sum() <= 0.01 * seen_a.sum()
     both = seen_a & seen_b
-    # MuJoCo's depth buffer rounds: 1e-4 of the 2 m distance at worst, float32 rounding typically
-    np.testing.assert_allclose(a[both], b[both], atol=1e-4)
-    assert np.median(np.abs(a[both] - b[both])) < 1e-6
+    # MuJoCo's depth buffer rounds: 1e-4 of the 2 m distance at worst, float32 rounding typically;
+    # a pixel centre on an occluding edge may see the near or the far surface
+    diff = np.abs(a[both] - b[both])
+    assert (diff > 1e-4).sum() <= 0.002 * both.sum() and np.median(diff) < 1e-6
