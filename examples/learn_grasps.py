@@ -10,7 +10,8 @@ What it does, in plain torch (no project code inside the model):
 2. model: a PointNet encoder (shared per-point MLP, max-pool) of the cloud conditions a CVAE whose
    grasp vector is [root translation / 10 cm, root rotation as the first two columns of its matrix,
    joints mapped to [-1, 1] by the hand's limits, pregrasp and squeeze joint offsets / 0.2 rad];
-   trained for ``--minutes`` (or ``--epochs``) with Adam on ``--threads`` CPU threads;
+   trained for ``--minutes`` (or ``--epochs``) with Adam on ``--threads`` CPU threads, each
+   object and its grasp turned together by a random rotation per step (``--augment``);
 3. sampling: ``--samples`` grasps per test object and scale, z ~ N(0, I), decoded to the three
    poses the MuJoCo test executes (pregrasp, grasp, squeeze; the root is shared, as in the data);
 4. evaluation: ``datagen eval`` (the six-direction hold test, the job's protocol) of the samples,
@@ -71,10 +72,15 @@ class GraspCoder:
     def __init__(self, lower: np.ndarray, upper: np.ndarray):
         self.lo, self.hi = torch.tensor(lower, dtype=torch.float32), torch.tensor(upper, dtype=torch.float32)
 
-    def encode(self, pre: torch.Tensor, grasp: torch.Tensor, squeeze: torch.Tensor) -> torch.Tensor:
+    def encode(self, pre: torch.Tensor, grasp: torch.Tensor, squeeze: torch.Tensor,
+               turn: torch.Tensor | None = None) -> torch.Tensor:
+        """``turn`` (N, 3, 3): the grasps of the object turned by these rotations (augmentation)."""
         R = quat_to_matrix(grasp[:, 3:7])
+        t = grasp[:, :3]
+        if turn is not None:
+            R, t = turn @ R, (turn @ t[:, :, None])[:, :, 0]
         joints = 2 * (grasp[:, 7:] - self.lo) / (self.hi - self.lo) - 1
-        return torch.cat([grasp[:, :3] / T_SCALE, R[:, :, 0], R[:, :, 1], joints,
+        return torch.cat([t / T_SCALE, R[:, :, 0], R[:, :, 1], joints,
                           (grasp[:, 7:] - pre[:, 7:]) / D_SCALE, (squeeze[:, 7:] - grasp[:, 7:]) / D_SCALE], 1)
 
     def decode(self, v: torch.Tensor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -134,12 +140,18 @@ class GraspCVAE(nn.Module):
         return self.dec(torch.cat([z, c], 1))
 
 
+def random_rotations(n: int, generator: torch.Generator) -> torch.Tensor:
+    """(n, 3, 3) rotations uniform on SO(3) (unit quaternions from a normal sample)."""
+    return quat_to_matrix(torch.randn(n, 4, generator=generator))
+
+
 def train(ds: ObservationGraspDataset, coder: GraspCoder, args) -> tuple[GraspCVAE, list[dict]]:
     clouds = torch.stack([o["points"] for o in ds.observations])  # (K, P, 3): each object and scale once
     obs_of = torch.tensor([r for _, r in ds.pairs])
     g = ds.grasps.poses
     idx = torch.tensor([i for i, _ in ds.pairs])
-    x = coder.encode(g["pregrasp_qpos"][idx], g["grasp_qpos"][idx], g["squeeze_qpos"][idx])
+    poses = [g[c][idx] for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")]
+    x = coder.encode(*poses)
     model = GraspCVAE(x.shape[1])
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     gen = torch.Generator().manual_seed(args.seed)
@@ -151,7 +163,11 @@ def train(ds: ObservationGraspDataset, coder: GraspCoder, args) -> tuple[GraspCV
         for b in perm.split(args.batch):
             pts = clouds[obs_of[b]]
             pts = pts[:, torch.randperm(pts.shape[1], generator=gen)[:args.train_points]]  # a random subset
-            rec, kl = model(pts, x[b])
+            xb = x[b]
+            if args.augment:  # object and grasp turned together: the same grasp of a turned object
+                turn = random_rotations(len(b), gen)
+                pts, xb = pts @ turn.transpose(1, 2), coder.encode(*(p[b] for p in poses), turn=turn)
+            rec, kl = model(pts, xb)
             loss = rec + beta * kl
             opt.zero_grad()
             loss.backward()
@@ -227,6 +243,8 @@ def main() -> None:
     ap.add_argument("--beta", type=float, default=0.02, help="KL weight (after a 50-epoch warm-up)")
     ap.add_argument("--points", type=int, default=1024, help="surface points of each cloud kept")
     ap.add_argument("--train-points", type=int, default=512, help="random points of the cloud per training step")
+    ap.add_argument("--augment", type=int, default=1,
+                    help="1: turn each training object and its grasp by a random rotation (0: as stored)")
     ap.add_argument("--samples", type=int, default=4, help="grasps sampled per test object and scale")
     ap.add_argument("--threads", type=int, default=2, help="torch threads and evaluation processes")
     ap.add_argument("--seed", type=int, default=0)

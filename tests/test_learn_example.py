@@ -45,3 +45,18 @@ def test_grasp_vector_hand_case():
     # a decoded joint beyond its limit is clamped to it
     v[0, 9] = 3.0
     assert coder.decode(v)[1][0, 7] == 1.0
+
+
+def test_turned_grasps_are_the_grasps_of_the_turned_object():
+    # a grasp at (0.1, 0, 0) with the identity orientation, the object turned 90 deg about z:
+    # the hand is at (0, 0.1, 0), turned the same way
+    coder = learn.GraspCoder(np.array([0.0]), np.array([1.0]))
+    g = torch.tensor([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.5]])
+    turn = torch.tensor([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    _, g2, _ = coder.decode(coder.encode(g, g, g, turn=turn))
+    np.testing.assert_allclose(g2[0, :3], [0.0, 0.1, 0.0], atol=1e-6)
+    c = np.sqrt(0.5)
+    np.testing.assert_allclose(np.abs(g2[0, 3:7]), [c, 0, 0, c], atol=1e-6)
+    R = learn.random_rotations(64, torch.Generator().manual_seed(0))
+    np.testing.assert_allclose((R @ R.transpose(1, 2)).numpy(), np.broadcast_to(np.eye(3), (64, 3, 3)), atol=1e-5)
+    assert torch.allclose(torch.linalg.det(R), torch.ones(64), atol=1e-5)

@@ -106,7 +106,7 @@ def test_the_table_has_the_declared_schema_and_reads_back_with_plain_pyarrow(row
 
 
 def test_points_only_needs_no_renderer(mug):
-    (r,) = observe_object(mug, (0.08,), ObservationConfig(points=64), seed=0, renderer="none-needed")
+    (r,) = observe_object(mug, (0.08,), ObservationConfig(points=64, views=0), seed=0, renderer="none-needed")
     assert r["view_points_m"] == [] and r["camera_poses"].shape == (0, 7) and r["depth_renderer"] == ""
 
 
