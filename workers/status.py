@@ -65,9 +65,11 @@ def job_status(path: str | Path) -> dict:
         stage_s.update({"shard_wall_s": entry.get("wall_s", 0.0), "shard_cpu_s": entry.get("cpu_s", 0.0)})
     for i in damaged:
         done.pop(i, None)
+    observations = sum(int(e.get("observations", 0)) for e in done.values())
     retryable = len(retryable_shards(job, done))
     return {"job": str(job.path), "config_hash": job.read_job()["config_hash"], "objects": n_objects,
             "shards_total": total, "shards_done": len(done), "grasps": grasps, "success": success,
+            "observations": observations,
             "success_rate": success / grasps if grasps else 0.0, "eval_reasons": dict(reasons.most_common()),
             "failures": dict(failures.most_common()), "stage_seconds": {k: round(v, 2) for k, v in stage_s.items()},
             "retryable": retryable, "damaged": {int(k): v for k, v in sorted(damaged.items())},
@@ -81,6 +83,8 @@ def format_status(s: dict) -> str:
              + ("" if s["complete"] else "  (incomplete: rerun to resume)"),
              f"  objects  {s['objects']}",
              f"  grasps   {s['grasps']}, {s['success']} successful ({s['success_rate']:.1%})"]
+    if s.get("observations"):
+        lines.append(f"  observations  {s['observations']} objects x scales (observations/: point clouds, camera views)")
     if s["eval_reasons"]:
         lines.append("  grasp outcomes: " + ", ".join(f"{k} {v}" for k, v in s["eval_reasons"].items()))
     lines.append("  failures: " + (", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "none"))
