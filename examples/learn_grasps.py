@@ -215,7 +215,8 @@ def summary(name: str, t: pa.Table, lo: np.ndarray, hi: np.ndarray) -> dict:
     return {"grasps": name, "n": len(ok), "success": float(ok.mean()) if len(ok) else math.nan,
             "penetration_mm_mean": float(np.nanmean(pen)) if len(pen) else math.nan,
             "penetration_mm_p90": float(np.nanpercentile(pen, 90)) if len(pen) else math.nan,
-            "reasons": dict(zip(*np.unique(np.asarray(t["reason"].to_pylist(), str), return_counts=True))),
+            "reasons": {str(k): int(v) for k, v in zip(*np.unique(np.asarray(t["reason"].to_pylist(), str),
+                                                                   return_counts=True))},
             "diversity_n": d.n, "pca": list(d.pca), "joint_entropy": d.joint_entropy}
 
 
@@ -227,8 +228,11 @@ def report_lines(rows: list[dict], args, info: dict) -> list[str]:
         ent = "-" if math.isnan(r["joint_entropy"]) else f"{r['joint_entropy']:.2f}"
         out.append(f"| {r['grasps']} | {r['n']} | {r['success']:.1%} | {r['penetration_mm_mean']:.1f} / "
                    f"{r['penetration_mm_p90']:.1f} | {r['diversity_n']} | {pca} | {ent} |")
+    out += ["", "outcomes (`reason`): " + "; ".join(
+        f"{r['grasps'].split(':')[0]}: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items(), key=lambda kv: -kv[1]))
+        for r in rows)]
     return [f"job `{info['job']}`: hand {info['hand']}, {info['train_grasps']} successful train grasps on "
-            f"{info['train_objects']} objects x scales; test: {info['test_rows']} objects x scales, "
+            f"{info['train_objects']} object-scale pairs; test: {info['test_rows']} object-scale pairs, "
             f"{args.samples} samples each; {info['epochs']} epochs in {info['train_s']:.0f} s on {args.threads} "
             f"thread(s)", ""] + out
 
@@ -261,7 +265,7 @@ def main() -> None:
     hand = load_hand(hand_name, base=job)
     lo, hi = hand.joint_lower.numpy(), hand.joint_upper.numpy()
     coder = GraspCoder(lo, hi)
-    print(f"training on {len(ds)} successful train grasps of {len(ds.observations)} objects x scales "
+    print(f"training on {len(ds)} successful train grasps of {len(ds.observations)} object-scale pairs "
           f"({args.threads} threads, <= {args.minutes:g} min)", flush=True)
     model, log = train(ds, coder, args)
 

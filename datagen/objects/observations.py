@@ -55,7 +55,7 @@ class ObservationConfig(Config):
     points: int = 2048               #: surface points (with normals) per object and scale; 0 with views 0: no
                                      #: observations at all
     views: int = 4                   #: single-view depth clouds per object and scale (0: none); the defaults
-                                     #: take ~75 KiB per object and scale on disk
+                                     #: take ~85 KiB per object and scale on disk
     renderer: str = "auto"           #: depth images: mujoco (needs an offscreen GL: MUJOCO_GL=egl or osmesa,
                                      #: `python -m datagen.gl`), raycast (trimesh, no GL), auto (mujoco where
                                      #: a GL backend works, else raycast)

@@ -13,16 +13,37 @@ from datagen.objects.views import (back_project, intrinsics, look_at_poses, rand
 
 
 def _gl() -> str:
-    from datagen.gl import GLUnavailable, select_backend
+    """The offscreen backend MuJoCo renders with here ('' if none), probed in a subprocess: this
+    process's environment is left as it is (mujoco may be imported already, with no backend)."""
+    import os
 
+    from datagen.gl import BACKENDS, probe
+
+    want = os.environ.get("MUJOCO_GL", "").lower()
+    return next((b for b in ([want] if want in BACKENDS else list(BACKENDS)) if not probe(b)), "")
+
+
+GL = _gl()
+needs_gl = pytest.mark.skipif(not GL, reason="MuJoCo's depth renderer needs an offscreen OpenGL backend "
+                                             "(egl: apt-get install libegl1, or osmesa: libosmesa6)")
+
+
+def mujoco_depth(*args):
+    """`render_depth` in a fresh worker interpreter started with ``MUJOCO_GL`` set (as
+    `datagen.objects.observations` renders: never in a process whose mujoco is already loaded)."""
+    import os
+
+    from datagen.objects.isolate import call_isolated
+
+    before = os.environ.get("MUJOCO_GL")
+    os.environ["MUJOCO_GL"] = GL
     try:
-        return select_backend()
-    except GLUnavailable as exc:
-        return f"no OpenGL backend: {exc}"
-
-
-needs_gl = pytest.mark.skipif(_gl() not in ("egl", "osmesa", "glx", "glfw"),
-                              reason="MuJoCo's depth renderer needs an offscreen OpenGL backend (egl or osmesa)")
+        return call_isolated(render_depth, args, 120.0, what="rendering", fresh=True)
+    finally:
+        if before is None:
+            del os.environ["MUJOCO_GL"]
+        else:
+            os.environ["MUJOCO_GL"] = before
 
 
 def _rot(pose):
@@ -88,14 +109,14 @@ def test_raycast_depth_of_a_box_head_on():
 
 @needs_gl
 def test_mujoco_depth_of_a_box_head_on():
-    _box_head_on(render_depth)
+    _box_head_on(mujoco_depth)
 
 
 @needs_gl
 def test_mujoco_and_raycast_agree_on_a_mesh_from_random_cameras():
     mesh = trimesh.creation.annulus(r_min=0.2, r_max=0.5, height=0.3, sections=24)  # not convex: occlusion
     poses = look_at_poses(random_directions(4, np.random.default_rng(1)), 2.0)
-    a = render_depth(mesh.vertices, mesh.faces, poses, 80, 60, 45.0, 6.0)
+    a = mujoco_depth(mesh.vertices, mesh.faces, poses, 80, 60, 45.0, 6.0)
     b = raycast_depth(mesh.vertices, mesh.faces, poses, 80, 60, 45.0, 6.0)
     seen_a, seen_b = a < 0.999 * 6.0, b < 6.0
     assert seen_a.sum() > 4 * 300
