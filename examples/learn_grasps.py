@@ -16,7 +16,8 @@ What it does, in plain torch (no project code inside the model):
    poses the MuJoCo test executes (pregrasp, grasp, squeeze; the root is shared, as in the data);
 4. evaluation: ``datagen eval`` (the six-direction hold test, the job's protocol) of the samples,
    of a baseline that ignores the object (train successes drawn at random at the same scale),
-   and, for reference, the dataset's own grasps of the same objects;
+   of one that retrieves the successes of the nearest train object (the clouds' Chamfer
+   distance), and, for reference, the dataset's own grasps of the same objects;
 5. report: success rate, penetration, and the successes' diversity (DexGraspBench's PCA, GraspQP's
    joint entropy: `datagen.eval.diversity`) of each, printed and written to OUT/report.md and
    OUT/report.json.
@@ -187,6 +188,23 @@ def train(ds: ObservationGraspDataset, coder: GraspCoder, args) -> tuple[GraspCV
 
 # --- evaluation -----------------------------------------------------------------------------------
 
+def nearest_train_grasps(ds: ObservationGraspDataset, clouds: torch.Tensor, test_obs: pa.Table, n: int) -> np.ndarray:
+    """Per test row, ``n`` indices into ``ds.grasps`` (cycled): the successes of the train object
+    and scale whose surface cloud is nearest its cloud (symmetric Chamfer distance, 256 points)."""
+    train = torch.stack([o["points"][:256] for o in ds.observations])
+    by_obs: dict = {}
+    for i, r in ds.pairs:
+        by_obs.setdefault(r, []).append(i)
+    have = sorted(by_obs)
+    out = []
+    for cloud in clouds[:, :256]:
+        d = torch.cdist(cloud[None].expand(len(have), -1, -1), train[have])
+        chamfer = d.min(2).values.mean(1) + d.min(1).values.mean(1)
+        idx = by_obs[have[int(chamfer.argmin())]]
+        out += [idx[k % len(idx)] for k in range(n)]
+    return np.array(out)
+
+
 def grasp_table(job: Path, obs: pa.Table, poses: tuple, per_row: int, hand: str, task: str) -> pa.Table:
     """The rows ``datagen eval`` reads (datagen/eval/table.py): ``per_row`` grasps per observation row."""
     rep = np.repeat(np.arange(obs.num_rows), per_row)
@@ -285,11 +303,16 @@ def main() -> None:
     base_idx = np.array([i for i, _ in ds.pairs])[picks]
     baseline = tuple(g[c][base_idx].numpy() for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"))
 
-    print(f"evaluating {len(samples[0])} sampled and {len(baseline[0])} baseline grasps in MuJoCo", flush=True)
+    nearest = tuple(g[c][nearest_train_grasps(ds, clouds, test_obs, args.samples)].numpy()
+                    for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"))
+
+    print(f"evaluating {len(samples[0])} sampled and 2 x {len(baseline[0])} baseline grasps in MuJoCo", flush=True)
     ev_model = evaluate(grasp_table(job, test_obs, samples, args.samples, hand_name, task), out / "cvae.parquet",
                         args.threads)
     ev_base = evaluate(grasp_table(job, test_obs, baseline, args.samples, hand_name, task),
                        out / "baseline.parquet", args.threads)
+    ev_near = evaluate(grasp_table(job, test_obs, nearest, args.samples, hand_name, task),
+                       out / "nearest.parquet", args.threads)
     keys = set(zip(test_obs["object_id"].to_pylist(), np.round(test_obs["object_scale_m"].to_numpy(), 6).tolist()))
     data = read_job(job, columns=["object_id", "object_scale_m", "success", "penetration_m", "grasp_qpos", "reason",
                                   "split"])
@@ -298,6 +321,7 @@ def main() -> None:
                                                          np.round(data["object_scale_m"].to_numpy(), 6).tolist())]))
     rows = [summary("CVAE samples", ev_model, lo, hi),
             summary("baseline: random train successes (object-blind)", ev_base, lo, hi),
+            summary("baseline: the nearest train object's successes (cloud Chamfer distance)", ev_near, lo, hi),
             summary("dataset's own grasps (synthesized, same objects)", data, lo, hi)]
     info = {"job": str(job), "hand": hand_name, "train_grasps": len(ds), "train_objects": len(ds.observations),
             "test_rows": test_obs.num_rows, "epochs": log[-1]["epoch"], "train_s": log[-1]["s"]}

@@ -60,3 +60,14 @@ def test_turned_grasps_are_the_grasps_of_the_turned_object():
     R = learn.random_rotations(64, torch.Generator().manual_seed(0))
     np.testing.assert_allclose((R @ R.transpose(1, 2)).numpy(), np.broadcast_to(np.eye(3), (64, 3, 3)), atol=1e-5)
     assert torch.allclose(torch.linalg.det(R), torch.ones(64), atol=1e-5)
+
+
+def test_nearest_train_grasps_retrieve_the_object_with_the_same_cloud():
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(300, 3)).astype(np.float32), (rng.normal(size=(300, 3)) * 3 + 5).astype(np.float32)
+    ds = SimpleNamespace(observations=[{"points": torch.from_numpy(a)}, {"points": torch.from_numpy(b)}],
+                         pairs=[(0, 1), (1, 0), (2, 1), (3, 0)])  # (grasp, observation): grasps 0, 2 are of b
+    test = torch.from_numpy(np.stack([b[::-1].copy(), a]))  # b's cloud reordered, then a's
+    np.testing.assert_array_equal(learn.nearest_train_grasps(ds, test, None, 3), [0, 2, 0, 1, 3, 1])
