@@ -190,6 +190,8 @@ def _diversity_section(job_dir: Path, rows: pa.Table | None) -> list[str]:
         div = job_diversity(job_dir)
     except JobError as exc:
         return md + [f"Not computed: {exc}", ""]
+    if not div:
+        return md + ["no successful grasps", ""]
     md += _table(["hand", "task", "object_scale_m", "grasps", "PCA explained variance, top 1 / 2 / 3 / 4 / 5",
                   "mean joint entropy (nats)"],
                  [[r["hand"], r["task"], "all" if r["object_scale_m"] is None else r["object_scale_m"], r["n"],
@@ -229,8 +231,8 @@ def _observations_section(obs: pa.Table | None, cfg: dict) -> list[str]:
               f"the camera poses and intrinsics recorded; rendered by {', '.join(renderers) or '-'}; "
               f"{min(pixels) if pixels else 0} to {max(pixels) if pixels else 0} object pixels per view)"
               if views else "; no camera views (`observations.views: 0`)") + ".", "", _OBS_READERS,
-           "A reference learner trained on these pairs, and what it shows: `examples/learn_grasps.py` "
-           "(`make learn JOB=<this directory>`), docs/learning.md in the datagen repository.", ""]
+           "A reference learner trained on these pairs, and what it shows: `python examples/learn_grasps.py "
+           "<this directory>` and docs/learning.md, in the datagen repository.", ""]
     return md
 
 
