@@ -225,7 +225,7 @@ class JobConfig(Config):
             resolve_renderer(self.observations.renderer)
         except GLUnavailable as exc:
             raise JobError(f"observations.renderer is mujoco (depth images): {exc}",
-                           "or set observations.renderer: auto (ray casting where no GL works)") from None
+                           "or set observations.renderer: auto, which ray-casts where no GL works") from None
 
     def _inputs_readable(self) -> bool:
         """Whether every task loads and the hand is a built-in name or an existing spec file."""
