@@ -48,6 +48,7 @@ from datagen.hands import load_hand
 from datagen.io import ObservationGraspDataset, points_of, read_job, read_observations
 
 T_SCALE, D_SCALE = 0.1, 0.2  # metres and radians of one unit of the model's translation and joint offsets
+POSES = ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
 
 
 # --- grasp vectors <-> qpos (pregrasp, grasp, squeeze) ----------------------------------------------
@@ -151,7 +152,7 @@ def train(ds: ObservationGraspDataset, coder: GraspCoder, args) -> tuple[GraspCV
     obs_of = torch.tensor([r for _, r in ds.pairs])
     g = ds.grasps.poses
     idx = torch.tensor([i for i, _ in ds.pairs])
-    poses = [g[c][idx] for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")]
+    poses = [g[c][idx] for c in POSES]
     x = coder.encode(*poses)
     model = GraspCVAE(x.shape[1])
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
@@ -213,7 +214,7 @@ def grasp_table(job: Path, obs: pa.Table, poses: tuple, per_row: int, hand: str,
     nq = poses[0].shape[1]
     return pa.table({**cols, "hand": [hand] * len(rep), "task": [task] * len(rep),
                      **{name: pa.FixedSizeListArray.from_arrays(pa.array(p.reshape(-1), pa.float32()), nq)
-                        for name, p in zip(("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"), poses)}})
+                        for name, p in zip(POSES, poses)}})
 
 
 def evaluate(table: pa.Table, out: Path, workers: int) -> pa.Table:
@@ -247,7 +248,7 @@ def report_lines(rows: list[dict], args, info: dict) -> list[str]:
         out.append(f"| {r['grasps']} | {r['n']} | {r['success']:.1%} | {r['penetration_mm_mean']:.1f} / "
                    f"{r['penetration_mm_p90']:.1f} | {r['diversity_n']} | {pca} | {ent} |")
     out += ["", "outcomes (`reason`): " + "; ".join(
-        f"{r['grasps'].split(':')[0]}: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items(), key=lambda kv: -kv[1]))
+        f"{r['grasps']}: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items(), key=lambda kv: -kv[1]))
         for r in rows)]
     return [f"job `{info['job']}`: hand {info['hand']}, {info['train_grasps']} successful train grasps on "
             f"{info['train_objects']} object-scale pairs; test: {info['test_rows']} object-scale pairs, "
@@ -255,7 +256,7 @@ def report_lines(rows: list[dict], args, info: dict) -> list[str]:
             f"thread(s)", ""] + out
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("job", type=Path, help="a finished job with observations and a train and a test split")
     ap.add_argument("--out", type=Path, default=Path("learn"), help="where the tables and the report go")
@@ -270,7 +271,39 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=4, help="grasps sampled per test object and scale")
     ap.add_argument("--threads", type=int, default=2, help="torch threads and evaluation processes")
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def grasps_for_test(ds: ObservationGraspDataset, model: GraspCVAE, coder: GraspCoder, test_obs: pa.Table,
+                args) -> dict[str, tuple]:
+    """name -> (pregrasp, grasp, squeeze) (n, 7 + J) each, ``args.samples`` per test row: the
+    model's samples, random train successes at the row's scale (object-blind), and the nearest
+    train object's successes."""
+    clouds = torch.from_numpy(np.stack([p[:args.points] for p in points_of(test_obs["surface_points_m"])]))
+    model.eval()
+    samples = coder.decode(model.sample(clouds, args.samples, torch.Generator().manual_seed(args.seed + 1)))
+    rng = np.random.default_rng(args.seed)
+    g, train_idx = ds.grasps.poses, np.array([i for i, _ in ds.pairs])
+    scale = ds.grasps.scale.numpy()[train_idx]
+    picks = np.concatenate([rng.choice(np.flatnonzero(np.isclose(scale, s)), args.samples)
+                            for s in test_obs["object_scale_m"].to_numpy()])
+    near = nearest_train_grasps(ds, clouds, test_obs, args.samples)
+    return {"cvae": samples, "baseline": tuple(g[c][train_idx[picks]].numpy() for c in POSES),
+            "nearest": tuple(g[c][near].numpy() for c in POSES)}
+
+
+def dataset_rows(job: Path, test_obs: pa.Table) -> pa.Table:
+    """The job's own evaluated grasps of the test rows' objects and scales."""
+    keys = set(zip(test_obs["object_id"].to_pylist(), np.round(test_obs["object_scale_m"].to_numpy(), 6).tolist()))
+    data = read_job(job, columns=["object_id", "object_scale_m", "success", "penetration_m", "grasp_qpos", "reason",
+                                  "split"])
+    data = data.filter(pc.equal(data["split"], "test"))
+    return data.filter(pa.array([k in keys for k in zip(data["object_id"].to_pylist(),
+                                                         np.round(data["object_scale_m"].to_numpy(), 6).tolist())]))
+
+
+def main() -> None:
+    args = parse_args()
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     job, out = args.job.resolve(), args.out.resolve()
@@ -291,38 +324,14 @@ def main() -> None:
                                                              "surface_points_m"])
     if not test_obs.num_rows:
         sys.exit(f"{job}: no test-split observations to sample for")
-    clouds = torch.from_numpy(np.stack([p[:args.points] for p in points_of(test_obs["surface_points_m"])]))
-    gen = torch.Generator().manual_seed(args.seed + 1)
-    model.eval()
-    samples = coder.decode(model.sample(clouds, args.samples, gen))
-    # the object-blind baseline: random train successes at the test row's scale
-    rng = np.random.default_rng(args.seed)
-    g, scale = ds.grasps.poses, ds.grasps.scale.numpy()
-    picks = np.concatenate([rng.choice(np.flatnonzero(np.isclose(scale[[i for i, _ in ds.pairs]], s)), args.samples)
-                            for s in test_obs["object_scale_m"].to_numpy()])
-    base_idx = np.array([i for i, _ in ds.pairs])[picks]
-    baseline = tuple(g[c][base_idx].numpy() for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"))
-
-    nearest = tuple(g[c][nearest_train_grasps(ds, clouds, test_obs, args.samples)].numpy()
-                    for c in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"))
-
-    print(f"evaluating {len(samples[0])} sampled and 2 x {len(baseline[0])} baseline grasps in MuJoCo", flush=True)
-    ev_model = evaluate(grasp_table(job, test_obs, samples, args.samples, hand_name, task), out / "cvae.parquet",
-                        args.threads)
-    ev_base = evaluate(grasp_table(job, test_obs, baseline, args.samples, hand_name, task),
-                       out / "baseline.parquet", args.threads)
-    ev_near = evaluate(grasp_table(job, test_obs, nearest, args.samples, hand_name, task),
-                       out / "nearest.parquet", args.threads)
-    keys = set(zip(test_obs["object_id"].to_pylist(), np.round(test_obs["object_scale_m"].to_numpy(), 6).tolist()))
-    data = read_job(job, columns=["object_id", "object_scale_m", "success", "penetration_m", "grasp_qpos", "reason",
-                                  "split"])
-    data = data.filter(pc.equal(data["split"], "test"))
-    data = data.filter(pa.array([k in keys for k in zip(data["object_id"].to_pylist(),
-                                                         np.round(data["object_scale_m"].to_numpy(), 6).tolist())]))
-    rows = [summary("CVAE samples", ev_model, lo, hi),
-            summary("baseline: random train successes (object-blind)", ev_base, lo, hi),
-            summary("baseline: the nearest train object's successes (cloud Chamfer distance)", ev_near, lo, hi),
-            summary("dataset's own grasps (synthesized, same objects)", data, lo, hi)]
+    grasps = grasps_for_test(ds, model, coder, test_obs, args)
+    print(f"evaluating {sum(len(p[0]) for p in grasps.values())} grasps in MuJoCo", flush=True)
+    ev = {k: evaluate(grasp_table(job, test_obs, p, args.samples, hand_name, task), out / f"{k}.parquet", args.threads)
+          for k, p in grasps.items()}
+    rows = [summary("CVAE samples", ev["cvae"], lo, hi),
+            summary("baseline: random train successes (object-blind)", ev["baseline"], lo, hi),
+            summary("baseline: the nearest train object's successes (cloud Chamfer distance)", ev["nearest"], lo, hi),
+            summary("dataset's own grasps (synthesized, same objects)", dataset_rows(job, test_obs), lo, hi)]
     info = {"job": str(job), "hand": hand_name, "train_grasps": len(ds), "train_objects": len(ds.observations),
             "test_rows": test_obs.num_rows, "epochs": log[-1]["epoch"], "train_s": log[-1]["s"]}
     lines = report_lines(rows, args, info)

@@ -8,7 +8,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-_spec = importlib.util.spec_from_file_location("learn_grasps", Path(__file__).parents[1] / "examples" / "learn_grasps.py")
+_spec = importlib.util.spec_from_file_location("learn_grasps",
+                                               Path(__file__).parents[1] / "examples" / "learn_grasps.py")
 learn = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(learn)
 

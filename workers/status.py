@@ -84,7 +84,8 @@ def format_status(s: dict) -> str:
              f"  objects  {s['objects']}",
              f"  grasps   {s['grasps']}, {s['success']} successful ({s['success_rate']:.1%})"]
     if s.get("observations"):
-        lines.append(f"  observations  {s['observations']} objects x scales (observations/: point clouds, camera views)")
+        lines.append(f"  observations  {s['observations']} objects x scales (observations/: point clouds, "
+                     "camera views)")
     if s["eval_reasons"]:
         lines.append("  grasp outcomes: " + ", ".join(f"{k} {v}" for k, v in s["eval_reasons"].items()))
     lines.append("  failures: " + (", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "none"))

@@ -186,7 +186,8 @@ def _lists(arrays: list, inner) -> "pyarrow.Array":  # noqa: F821
 def _points(arrays: list, width: int = 3) -> "pyarrow.Array":  # noqa: F821
     import pyarrow as pa
 
-    flat = np.concatenate([np.asarray(a, np.float32).reshape(-1) for a in arrays]) if arrays else np.zeros(0, np.float32)
+    flat = (np.concatenate([np.asarray(a, np.float32).reshape(-1) for a in arrays]) if arrays
+            else np.zeros(0, np.float32))
     return pa.FixedSizeListArray.from_arrays(pa.array(flat, pa.float32()), width)
 
 
