@@ -107,6 +107,20 @@ dataset: $(STAMP)
 	$(PY) -m datagen.cli run --out $(OUT) --objects $(SCALE) --hand $(HAND) --tasks $(TASKS) \
 		--source $(SOURCE) $(DATASET_ARGS)
 
+# Learning-ready data (issue 46): a job with a train and a test split and object observations
+# (examples/learn_job.yaml; resumed if it exists), then the reference learner trained on its train
+# split, its samples tested in MuJoCo -> $(LEARN_OUT)/report.md (docs/learning.md)
+LEARN_JOB ?= jobs/learn
+LEARN_OUT ?= $(LEARN_JOB)-learner
+LEARN_RUN_ARGS ?=
+LEARN_ARGS ?=
+.PHONY: learn-data learn
+learn-data: $(STAMP) hands
+	$(PY) -m datagen.cli run --config examples/learn_job.yaml --out $(LEARN_JOB) $(LEARN_RUN_ARGS)
+
+learn: learn-data
+	$(PY) examples/learn_grasps.py $(LEARN_JOB) --out $(LEARN_OUT) $(LEARN_ARGS)
+
 bench-pipeline: $(STAMP)
 	$(PY) -m benchmarks.bench_pipeline --default-job 2 --grasps-sweep 4,8,16,32 --cold 40 --ceiling 4
 

@@ -1,7 +1,8 @@
 """Versioned Arrow schemas for datagen's Parquet files, declared once in JSON.
 
 ``grasps.json`` (synthesized rows), ``evaluated.json`` (a dataset shard: grasps + the MuJoCo
-evaluation columns, via ``extends``) and ``failures.json`` (a job's failed objects) declare
+evaluation columns, via ``extends``), ``failures.json`` (a job's failed objects) and
+``observations.json`` (a job's object observations: point clouds, camera views) declare
 every column (type, shape, unit, frame, doc; names end with their unit, `UNIT_SUFFIXES`); :func:`arrow_schema`
 builds the ``pyarrow.Schema`` from it (``nq`` = 7 + the hand's joint count), with the schema
 name and version in the metadata; :func:`check_version` refuses files of another version.
@@ -10,6 +11,7 @@ name and version in the metadata; :func:`check_version` refuses files of another
 from __future__ import annotations
 
 import json
+import re
 from functools import lru_cache
 from pathlib import Path
 
@@ -44,21 +46,21 @@ def columns(name: str = "grasps") -> list[dict]:
     return parent + decl["columns"]
 
 
+def _parse_type(t: str, dims: dict[str, int]) -> pa.DataType:
+    """``string``, ``float32``, ... ; ``float32[N]`` a fixed-size list; ``list<T>`` a list of T."""
+    if t.startswith("list<") and t.endswith(">"):
+        return pa.list_(_parse_type(t[5:-1], dims))
+    m = re.fullmatch(r"(\w+)\[(\w+)\]", t)
+    if m:
+        return pa.list_(_SCALARS[m[1]], dims[m[2]] if not m[2].isdigit() else int(m[2]))
+    return _SCALARS[t]
+
+
 def _arrow_type(col: dict, dims: dict[str, int]) -> pa.DataType:
-    t = col["type"]
-    if t == "list<string>":
-        return pa.list_(pa.string())
-    if t == "list<bool>":
-        return pa.list_(pa.bool_())
-    if t == "list<float32>":
-        return pa.list_(pa.float32())
-    if t == "list<float32[3]>":
-        return pa.list_(pa.list_(pa.float32(), 3))
-    base = _SCALARS[t]
+    base = _parse_type(col["type"], dims)
     if "shape" in col:
         (n,) = col["shape"]
-        size = dims[n] if isinstance(n, str) else int(n)
-        return pa.list_(base, size)
+        return pa.list_(base, dims[n] if isinstance(n, str) else int(n))
     return base
 
 

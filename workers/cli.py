@@ -162,19 +162,31 @@ def register_status(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("status", help="progress and outcomes of a job directory")
     p.add_argument("job", help="job directory")
     p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--diversity", action="store_true",
+                   help="also the successes' diversity per task and scale (PCA explained variance, joint entropy)")
     p.set_defaults(func=_status, interrupted="nothing was written")
 
 
 def _status(args) -> int:
+    from datagen.io import ShardError
+
     from .job import JobError
-    from .status import format_status, job_status
+    from .status import format_diversity, format_status, job_diversity, job_status
 
     try:
         s = job_status(args.job)
+        if args.diversity:
+            s["diversity"] = job_diversity(args.job)
     except JobError as exc:
         print(f"datagen status: error: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(s, indent=1) if args.json else format_status(s))
+    except ShardError as exc:
+        print(f"datagen status: error: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(s, indent=1))
+    else:
+        print(format_status(s) + ("\n" + format_diversity(s["diversity"]) if args.diversity else ""))
     return 0
 
 

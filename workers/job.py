@@ -33,11 +33,12 @@ from datagen import _bounded
 from datagen._atomic import atomic_write_text
 from datagen.io import integrity
 from datagen.objects.manifest import NATIVE
+from datagen.objects.observations import ObservationConfig
 from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
 from datagen.pipeline.recipe import DEFAULT_PRESET, resolve
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, MANIFEST_FAILURES,
-                               OBJECTS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
+                               OBJECTS_DIR, OBSERVATIONS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
 
 __all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "JobIOError", "code_version",
            "package_versions", "shard_size", "shard_slices", "writing"]
@@ -135,6 +136,9 @@ class JobConfig(Config):
     process: dict[str, Any] = field(default_factory=dict)  #: ProcessConfig fields (CoACD, ...)
     grid_resolution: int | None = None  #: synthesis SDF grid nodes per axis, 8 to 256 (None: the preset's;
                                         #: 64: ~25 s/object on one core, 48: ~10 s, 32: ~3 s)
+    # what a learner sees of each object and scale, beside the shards (observations/part-NNNNN.parquet;
+    # datagen.objects.observations; cost: docs/learning.md): surface points and normals by default
+    observations: ObservationConfig = field(default_factory=ObservationConfig)  #: ObservationConfig fields
     cpus_per_shard: float = 1.0         #: Ray resources of one shard task; also its torch threads and
                                         #: its evaluation processes (not hashed: keep it fixed within a
                                         #: job for identical floats)
@@ -146,6 +150,8 @@ class JobConfig(Config):
                 raise JobError(f"JobConfig.{what}")
 
         check_types(self)
+        if isinstance(self.observations, Mapping):  # constructed in code with a mapping
+            object.__setattr__(self, "observations", ObservationConfig.from_dict(self.observations, "observations"))
         if isinstance(self.tasks, str):
             object.__setattr__(self, "tasks", (self.tasks,))
         need(all(t for t in self.tasks), f"tasks must be names or paths, got {self.tasks!r}")
@@ -185,10 +191,11 @@ class JobConfig(Config):
 
     def check_runnable(self):
         """Refuse (JobError naming the value and the valid ones) a hand or task this machine
-        cannot load, before any work starts; returns the loaded hand (`load_hand`). Not part of
-        construction: ``datagen status`` reads job.json on machines that may lack a hand's asset
-        package."""
+        cannot load, or MuJoCo-rendered camera views without an offscreen GL backend, before any work starts;
+        returns the loaded hand (`load_hand`). Not part of construction: ``datagen status`` reads
+        job.json on machines that may lack a hand's asset package."""
         hand = self.load_hand()
+        self.check_observations()
         from datagen.objects.errors import ObjectError
         from datagen.objects.manifest import load_manifest
         from datagen.objects.sources import canonical_source
@@ -204,6 +211,21 @@ class JobConfig(Config):
             raise JobError(str(exc)) from None
         self.check_tasks()
         return hand
+
+    def check_observations(self) -> None:
+        """With camera views, resolve the depth renderer now (`resolve_renderer`: for MuJoCo's it
+        chooses the offscreen GL backend and sets MUJOCO_GL, which the local Ray workers inherit);
+        refuse (JobError) ``renderer: mujoco`` when no GL backend works (``auto`` casts rays then)."""
+        if not self.observations.views:
+            return
+        from datagen.gl import GLUnavailable
+        from datagen.objects.observations import resolve_renderer
+
+        try:
+            resolve_renderer(self.observations.renderer)
+        except GLUnavailable as exc:
+            raise JobError(f"observations.renderer is mujoco (depth images): {exc}",
+                           "or set observations.renderer: auto, which ray-casts where no GL works") from None
 
     def _inputs_readable(self) -> bool:
         """Whether every task loads and the hand is a built-in name or an existing spec file."""
@@ -327,6 +349,9 @@ class JobDir:
 
     def shard_path(self, index: int) -> Path:
         return self.path / SHARDS_DIR / f"{self.shard_name(index)}.parquet"
+
+    def observations_path(self, index: int) -> Path:
+        return self.path / OBSERVATIONS_DIR / f"{self.shard_name(index)}.parquet"
 
     def shard_failures_path(self, index: int) -> Path:
         return self.path / FAILURES_DIR / f"{self.shard_name(index)}.parquet"
@@ -503,8 +528,8 @@ class JobDir:
         in the job's folders, objects being linked in); returns them. Only under the lock: no
         other run of this job writes them now."""
         gone = []
-        for d in (self.path, self.path / SHARDS_DIR, self.path / FAILURES_DIR, self.path / LEDGER_DIR,
-                  self.path / PROGRESS_DIR, self.objects_dir):
+        for d in (self.path, self.path / SHARDS_DIR, self.path / OBSERVATIONS_DIR, self.path / FAILURES_DIR,
+                  self.path / LEDGER_DIR, self.path / PROGRESS_DIR, self.objects_dir):
             for p in d.glob(".*.tmp") if d.is_dir() else ():
                 if p.is_dir() and not p.is_symlink():
                     shutil.rmtree(p, ignore_errors=True)

@@ -1,7 +1,8 @@
 """``datagen report JOB_DIR``: a dataset card (JOB_DIR/README.md) with tables and rendered grasps.
 
-The card opens with Hugging Face front matter (``configs: data_files`` naming the shards), then
-outcomes, a column table generated from ``schemas/evaluated.json`` (name, unit, frame, meaning),
+The card opens with Hugging Face front matter (``configs: data_files`` naming the shards, and
+the object observations as a second config), then outcomes, the successes' diversity, the
+observations, a column table generated from ``schemas/evaluated.json`` (name, unit, frame, meaning),
 reader snippets, and captioned pictures of successes and failures across several objects.
 Rendering uses MuJoCo's offscreen GL, chosen by `datagen.gl.select_backend` (``MUJOCO_GL`` if set,
 else egl, then osmesa); when no backend works the card says so instead of showing pictures.
@@ -39,7 +40,22 @@ configs:
   data_files:
   - split: train
     path: shards/part-*.parquet
----
+{observations}---
+"""
+_OBS_CONFIG = """- config_name: observations
+  data_files:
+  - split: train
+    path: observations/part-*.parquet
+"""
+_OBS_READERS = """```python
+import pandas as pd                                   # one row per object and scale, no project code needed
+obs = pd.read_parquet("observations")
+grasps = pd.read_parquet("shards")
+pairs = grasps.merge(obs, on=["object_id", "object_scale_m"])   # each grasp with its object's clouds
+
+from datagen.io import ObservationGraspDataset        # with the project: (observation, grasp) torch pairs
+ds = ObservationGraspDataset(".", split="train", points=1024)
+```
 """
 _READERS = """```python
 import pandas as pd                                   # any Parquet reader works, no project code needed
@@ -163,6 +179,63 @@ def _columns_section(rows: pa.Table | None) -> list[str]:
     return md
 
 
+def _diversity_section(job_dir: Path, rows: pa.Table | None) -> list[str]:
+    """The successes' diversity per task and scale (`job_diversity`), or why it is not shown."""
+    from .status import DIVERSITY_LEGEND, job_diversity
+
+    md = ["### Diversity (successful grasps)", ""]
+    if rows is None:
+        return md + ["no grasps", ""]
+    try:
+        div = job_diversity(job_dir)
+    except JobError as exc:
+        return md + [f"Not computed: {exc}", ""]
+    if not div:
+        return md + ["no successful grasps", ""]
+    md += _table(["hand", "task", "object_scale_m", "grasps", "PCA explained variance, top 1 / 2 / 3 / 4 / 5",
+                  "mean joint entropy (nats)"],
+                 [[r["hand"], r["task"], "all" if r["object_scale_m"] is None else r["object_scale_m"], r["n"],
+                   " / ".join("-" if x is None else f"{x:.2f}" for x in r["pca"]),
+                   "-" if r["joint_entropy"] is None else f"{r['joint_entropy']:.2f}"] for r in div])
+    return md + [DIVERSITY_LEGEND + ". `datagen status --diversity` prints the same table.", ""]
+
+
+def _observations(job: JobDir) -> pa.Table | None:
+    """The job's observation rows without their point columns, or None when it has none."""
+    from datagen.io import observation_paths
+
+    if not observation_paths(job.path):
+        return None
+    from datagen.io import read_observations
+
+    return read_observations(job.path, columns=["object_id", "object_scale_m", "split", "view_pixels",
+                                                "depth_renderer"])
+
+
+def _observations_section(obs: pa.Table | None, cfg: dict) -> list[str]:
+    md = ["## Object observations", ""]
+    if obs is None:
+        return md + ["None in this job (`observations: {points: 0, views: 0}`, or a job made before they existed).", ""]
+    o = cfg.get("observations") or {}
+    views = o.get("views", 0)
+    renderers = sorted({r for r in obs["depth_renderer"].to_pylist() if r})
+    pixels = [n for v in obs["view_pixels"].to_pylist() for n in v]
+    md += [f"`observations/part-NNNNN.parquet` beside each shard: {obs.num_rows} rows, one per object and scale "
+           f"({len(set(obs['object_id'].to_pylist()))} objects), joinable to the grasps on `object_id` and "
+           f"`object_scale_m` (schema `observations`, `schemas/observations.json`; in the ledger, checked by "
+           "`datagen verify`). Each row: "
+           f"{o.get('points', 2048)} surface points with outward normals and the bounding box, in the grasps' "
+           "object frame and metres"
+           + (f"; {views} single-view partial clouds (depth images of {o.get('image_width', 160)} x "
+              f"{o.get('image_height', 120)} px back-projected, at most {o.get('view_points', 1024)} points each; "
+              f"the camera poses and intrinsics recorded; rendered by {', '.join(renderers) or '-'}; "
+              f"{min(pixels) if pixels else 0} to {max(pixels) if pixels else 0} object pixels per view)"
+              if views else "; no camera views (`observations.views: 0`)") + ".", "", _OBS_READERS,
+           "A reference learner trained on these pairs, and what it shows: `python examples/learn_grasps.py "
+           "<this directory>` and docs/learning.md, in the datagen repository.", ""]
+    return md
+
+
 def _evaluation_line(overrides: dict, job_code: str) -> str:
     """The MuJoCo test the rows' ``success`` comes from: `EvalConfig` with the job's ``eval``
     overrides, as this code resolves them (named when it is not the job's own code version)."""
@@ -218,7 +291,8 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
     fails = (integrity.read_parquet(job.failures_path, remedy=integrity.redo_remedy(job.path))
              if job.failures_path.is_file() else None)
     cfg = doc["config"]
-    md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}")),
+    obs = _observations(job)
+    md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}"), observations=_OBS_CONFIG if obs else ""),
           f"# Dataset card: {job.path.name}", "",
           f"Dexterous grasps of the **{cfg['hand']}** hand on {s['objects']} objects from `{cfg['source']}`, "
           f"tasks {', '.join(cfg['tasks'])}, synthesized by `datagen` and verified in MuJoCo.", "",
@@ -259,6 +333,8 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
                 mrows.append([f"`{col}`", unit or "as stored", f"{pc.mean(v).as_py() * mult:.3g}",
                               f"{pc.max(v).as_py() * mult:.3g}"])
         md += _table(["column", "shown in", "mean", "max"], mrows) if mrows else ["no successful grasps", ""]
+    md += _diversity_section(job.path, rows)
+    md += _observations_section(obs, cfg)
     md += ["## Failures (objects without rows)", ""]
     if fails is not None and fails.num_rows:
         md += _table(["stage", "reason", "objects"],

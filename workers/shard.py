@@ -191,7 +191,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     n_targets = sum(len(d["scales"]) for d in entries)
     progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets,
                              node=_node_id())
-    timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
+    timings = {"process_s": 0.0, "observe_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
     fails: list[dict] = []
 
     # 1. objects: processed in isolation, linked into the job directory
@@ -220,6 +220,11 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         finally:
             progress.add(1)
     timings["process_s"] = time.perf_counter() - t0
+
+    # 1b. what a learner sees of each object and scale (isolated too: the renderer is native code)
+    t0 = time.perf_counter()
+    observations = _observe(ready, cfg, index, fails) if cfg.observations.enabled else None
+    timings["observe_s"] = time.perf_counter() - t0
 
     # 2-4. synthesis targets, synthesis per task, MuJoCo evaluation (datagen.pipeline)
     hand = _hand(provenance.get("hand") or cfg.hand, job, device)
@@ -257,11 +262,21 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         files[integrity.shard_file(index)] = write_table_atomic(out, job.shard_path(index))
     else:  # no rows: no shard file (some readers, e.g. Hugging Face datasets, reject empty Parquet files)
         job.shard_path(index).unlink(missing_ok=True)
+    if observations is not None and observations.num_rows:
+        obs_meta = {**dict(observations.schema.metadata), **{k.encode(): v.encode() for k, v in {
+            "datagen.observation_config": json.dumps(cfg.observations.to_dict(), sort_keys=True),
+            "datagen.code_version": provenance["code_version"], "datagen.config_hash": cfg.hash(),
+            "datagen.shard": str(index)}.items()}}
+        files[integrity.observations_file(index)] = write_table_atomic(observations.replace_schema_metadata(obs_meta),
+                                                                       job.observations_path(index))
+    else:
+        job.observations_path(index).unlink(missing_ok=True)
     files[integrity.failures_file(index)] = write_table_atomic(
         pa.Table.from_pylist(fails, schema=arrow_schema("failures")), job.shard_failures_path(index))
     timings["write_s"] = time.perf_counter() - t0
     n_ok = int(pc.sum(out["success"]).as_py() or 0) if out.num_rows else 0
     summary = {"shard": index, "objects": len(entries), "objects_ok": len(ready), "grasps": out.num_rows,
+               "observations": observations.num_rows if observations is not None else 0,
                "success": n_ok, "failures": len(fails), "host": socket.gethostname(), "device": device,
                "timings": {k: round(v, 3) for k, v in timings.items()},
                "wall_s": round(time.perf_counter() - t_start, 3),
@@ -272,6 +287,27 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     job.record_finished(index, summary)
     progress.set(progress.total)
     return summary
+
+
+def _observe(ready: list, cfg: JobConfig, index: int, fails: list):
+    """The ``observations`` table of the shard's processed objects at their scales
+    (`datagen.objects.observations`, each object in a worker process with the object time
+    limit); an object that cannot be observed is a failure row (stage ``observe``) and keeps its
+    grasps."""
+    from datagen.gl import GLUnavailable
+    from datagen.objects.observations import ObservationError, observation_table, observe_isolated
+
+    rows: list[dict] = []
+    for o in ready:
+        try:
+            rows += observe_isolated(o.processed, o.scales, cfg.observations, cfg.seed, cfg.object_timeout_s,
+                                     object_id=o.object_id, object_path=o.object_path, split=o.split,
+                                     mesh_sha256=o.mesh_sha256)
+        except ObservationError as exc:
+            _failure(fails, index, o.object_id, "observe", exc.reason, str(exc))
+        except GLUnavailable as exc:  # this node renders nothing: every object says so
+            _failure(fails, index, o.object_id, "observe", "no_gl", f"{o.object_id}: {exc}")
+    return observation_table(rows)
 
 
 class ShardProgress:

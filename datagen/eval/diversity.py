@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GraspDiversity", "grasp_diversity", "pose_features", "pca_explained_variance", "joint_entropy",
-           "ENTROPY_BINS", "PCA_COMPONENTS"]
+__all__ = ["GraspDiversity", "grasp_diversity", "grouped_diversity", "pose_features", "pca_explained_variance",
+           "joint_entropy", "ENTROPY_BINS", "PCA_COMPONENTS"]
 
 ENTROPY_BINS = 32   #: GraspQP's bins per joint
 PCA_COMPONENTS = 5  #: DexGraspBench's reported components
@@ -137,3 +137,15 @@ def grasp_diversity(qpos: np.ndarray, lower: np.ndarray, upper: np.ndarray,
         return GraspDiversity(0, (math.nan,) * PCA_COMPONENTS, math.nan)
     pca = pca_explained_variance(pose_features(qpos, obj_pose))
     return GraspDiversity(len(qpos), tuple(float(x) for x in pca), joint_entropy(qpos[:, 7:], lower, upper))
+
+
+def grouped_diversity(qpos: np.ndarray, keys: list, lower: np.ndarray, upper: np.ndarray) -> list[tuple]:
+    """``[(key, GraspDiversity), ...]`` of the rows ``qpos`` (N, 7 + J) sharing each distinct
+    ``keys[i]`` (N hashable, sortable keys, e.g. (task, scale)), in sorted key order."""
+    qpos = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
+    if len(keys) != len(qpos):
+        raise ValueError(f"grouped_diversity: {len(keys)} keys for {len(qpos)} rows")
+    index: dict = {}
+    for i, k in enumerate(keys):
+        index.setdefault(k, []).append(i)
+    return [(k, grasp_diversity(qpos[index[k]], lower, upper)) for k in sorted(index)]

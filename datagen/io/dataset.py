@@ -18,18 +18,17 @@ import pyarrow.parquet as pq
 from schemas import SchemaError, check_version
 
 from . import layout
-from .integrity import ShardError, audit, redo_remedy
+from .integrity import ShardError, audit, read_parquet, redo_remedy
 
-__all__ = ["POSE_COLUMNS", "joint_names", "open_dataset", "read_job", "shard_paths"]
+__all__ = ["POSE_COLUMNS", "joint_names", "observation_paths", "open_dataset", "read_job", "read_observations",
+           "shard_paths"]
 
 POSE_COLUMNS = ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
 
 
-def shard_paths(job_dir: str | Path) -> list[Path]:
-    """Finished shard files of a job, in shard order (raises FileNotFoundError if not a job).
-    A finished shard without rows (all its objects failed) has no file. Each file is checked
-    against its ledger entry (size and footer row count: `integrity.audit`); the first that does
-    not match raises `ShardError` naming it."""
+def _audited(job_dir: str | Path):
+    """`integrity.audit` of the job (raises FileNotFoundError if not a job, `ShardError` naming
+    the first file that does not match its ledger entry)."""
     job = Path(job_dir)
     if not (job / layout.JOB_JSON).is_file():
         raise FileNotFoundError(f"{job} is not a datagen job directory (no {layout.JOB_JSON})")
@@ -40,7 +39,43 @@ def shard_paths(job_dir: str | Path) -> list[Path]:
         more = (f"; and {len(found.problems) - 1} more shard(s) (`datagen verify {job}` lists them)"
                 if len(found.problems) > 1 else "")
         raise ShardError(job / path, reason + more, redo_remedy(job))
-    return list(found.shard_files(job).values())
+    return found
+
+
+def shard_paths(job_dir: str | Path) -> list[Path]:
+    """Finished shard files of a job, in shard order (raises FileNotFoundError if not a job).
+    A finished shard without rows (all its objects failed) has no file. Each file is checked
+    against its ledger entry (size and footer row count: `integrity.audit`); the first that does
+    not match raises `ShardError` naming it."""
+    return list(_audited(job_dir).shard_files(job_dir).values())
+
+
+def observation_paths(job_dir: str | Path) -> list[Path]:
+    """Observation files of the finished shards (``observations/part-NNNNN.parquet``), in shard
+    order, each checked against its ledger entry as `shard_paths` checks the shards. A job made
+    with ``observations`` off, or before they existed, has none."""
+    return list(_audited(job_dir).observation_files(job_dir).values())
+
+
+def read_observations(job_dir: str | Path, columns: list[str] | None = None, split: str | None = None) -> pa.Table:
+    """The job's object observations (schema ``observations``: one row per object and scale,
+    joinable to `read_job`'s rows on ``object_id`` and ``object_scale_m``), every file checked
+    against the ledger, its schema version and its page checksums; ``split``: only that split's
+    objects. FileNotFoundError when the job has none."""
+    paths = observation_paths(job_dir)
+    if not paths:
+        raise FileNotFoundError(f"{job_dir}: no object observations (a job with `observations: {{points: 0, "
+                                "views: 0}}`, made before they existed, or with no finished shard yet)")
+    flt = pc.field("split") == split if split is not None else None
+    parts = []
+    for p in paths:
+        try:
+            check_version(pq.read_schema(p), "observations", where=str(p))
+        except (OSError, pa.ArrowException) as exc:
+            raise ShardError(p, f"its Parquet footer cannot be read ({' '.join(str(exc).split())})",
+                             redo_remedy(job_dir)) from None
+        parts.append(read_parquet(p, columns=columns, filter=flt, remedy=redo_remedy(job_dir)))
+    return pa.concat_tables(parts)
 
 
 def _format():

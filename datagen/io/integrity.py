@@ -4,9 +4,11 @@ A finished shard's ledger entry (``ledger/part-NNNNN.json``, written last) lists
 wrote, by path relative to the job directory::
 
     "files": {"shards/part-00003.parquet":   {"bytes": 48213, "rows": 96, "sha256": "9f1c..."},
+              "observations/part-00003.parquet": {"bytes": 157322, "rows": 4, "sha256": "5d2e..."},
               "failures/part-00003.parquet": {"bytes": 2210, "rows": 1, "sha256": "04ab..."}}
 
-(a shard without rows lists no shard file). Readers trust only what the ledger lists, as it
+(a shard without rows lists no shard file; a job without observations, or a shard whose objects
+all failed, no observations file). Readers trust only what the ledger lists, as it
 lists it: `audit` checks every entry, cheaply (each file's size and its Parquet footer's row
 count) or deeply (also its sha256, and that the processed objects its rows name are in the
 job). Every Parquet file is written with page checksums (CRC32 per page, `WRITE_OPTIONS`) and
@@ -35,8 +37,8 @@ from datagen.errors import DatagenError
 
 from . import layout
 
-__all__ = ["Audit", "ShardError", "WRITE_OPTIONS", "audit", "check_file", "file_record", "read_ledger",
-           "read_parquet", "sha256_of"]
+__all__ = ["Audit", "ShardError", "WRITE_OPTIONS", "audit", "check_file", "file_record", "observations_file",
+           "read_ledger", "read_parquet", "sha256_of"]
 
 #: keyword arguments of every ``pq.write_table`` of a job's files: CRC32 page checksums
 WRITE_OPTIONS = {"write_page_checksum": True}
@@ -150,9 +152,18 @@ class Audit:
                 out[i] = p
         return out
 
+    def observation_files(self, job_dir: str | Path) -> dict[int, Path]:
+        """Observation files of the finished shards that recorded one, by index."""
+        return {i: Path(job_dir) / observations_file(i) for i, entry in sorted(self.finished.items())
+                if observations_file(i) in entry.get("files", {})}
+
 
 def shard_file(index: int) -> str:
     return f"{layout.SHARDS_DIR}/{layout.SHARD_NAME.format(index=index)}.parquet"
+
+
+def observations_file(index: int) -> str:
+    return f"{layout.OBSERVATIONS_DIR}/{layout.SHARD_NAME.format(index=index)}.parquet"
 
 
 def failures_file(index: int) -> str:

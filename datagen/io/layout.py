@@ -3,6 +3,8 @@
     job.json                     the job's config, its hash, code and package versions
     manifest.jsonl               the manifest slice of the job
     shards/part-NNNNN.parquet    grasp rows of shard N (schema ``evaluated``)
+    observations/part-NNNNN.parquet  object observations of shard N's objects, one row per object and
+                                 scale (schema ``observations``: point clouds, camera views)
     failures/part-NNNNN.parquet  failed objects of shard N (schema ``failures``)
     failures.parquet             all failures
     objects/<entry>/             processed objects; rows' ``object_path`` is relative to the job dir
@@ -17,6 +19,7 @@
 JOB_JSON = "job.json"
 MANIFEST = "manifest.jsonl"
 SHARDS_DIR = "shards"
+OBSERVATIONS_DIR = "observations"
 FAILURES_DIR = "failures"
 FAILURES = "failures.parquet"
 OBJECTS_DIR = "objects"

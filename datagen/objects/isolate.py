@@ -35,7 +35,7 @@ from .errors import ObjectError, Reason
 from .manifest import ManifestEntry
 from .process import ProcessedObject, as_object, load_processed, process_object
 
-__all__ = ["Children", "process_isolated"]
+__all__ = ["Children", "IsolatedFailure", "call_isolated", "process_isolated"]
 
 #: ``step(ref, cfg, root, expected_sha256) -> ProcessedObject``: what the child runs
 Step = Callable[..., ProcessedObject]
@@ -95,6 +95,61 @@ def _failed(entry: ManifestEntry, reason: str, message: str) -> ProcessedObject:
     return ProcessedObject(entry.id, "failed", reason, message, mesh_sha256=entry.sha256)
 
 
+class IsolatedFailure(Exception):
+    """What `call_isolated` raises when its step did not answer: ``reason`` (``timeout``,
+    ``crashed`` or ``error``) and ``detail`` (one line without the thing's name)."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        self.reason, self.detail = reason, detail
+        super().__init__(f"{reason}: {detail}")
+
+
+def call_isolated(step: Callable, args: tuple, timeout_s: float, *, what: str = "processing",
+                  remedy: str = "raise the time limit and rerun", children: Children | None = None,
+                  fresh: bool = False):
+    """``step(*args)`` in a worker interpreter (`isolated_worker`) killed after ``timeout_s``;
+    returns its reply. ``step`` must be importable by module. Raises `IsolatedFailure`: ``timeout``
+    (killed; ``remedy`` is the caller's advice), ``crashed`` (the worker died or could not start)
+    or ``error`` (the worker cannot load the step). ``fresh``: a new worker rather than an idle
+    one (e.g. one started with this process's environment as it is now); ``children``: where the
+    worker is registered while it runs."""
+    worker = None
+    try:
+        for _ in range(2):  # an idle worker can have died since (Ctrl-C, OOM): one fresh retry
+            worker = isolated_worker.IsolatedWorker() if fresh else isolated_worker.take()
+            if children is not None:
+                children._add(worker)
+            try:
+                worker.wait_ready()  # its start (imports) is not the object's time
+                worker.submit((step, args))
+                break
+            except (BrokenPipeError, ConnectionResetError, EOFError, TimeoutError):
+                _release(worker, children, kill=True)
+                worker = None
+        if worker is None:
+            raise IsolatedFailure(Reason.CRASHED.value, f"no {what} worker could be started")
+        try:
+            kind, reply = worker.result(timeout_s)
+        except TimeoutError:
+            _release(worker, children, kill=True)
+            raise IsolatedFailure(Reason.TIMEOUT.value,
+                                  f"{what} exceeded {timeout_s:g} s and was killed ({remedy})") from None
+        except (EOFError, ConnectionResetError):
+            code = worker.exitcode()  # it is exiting: its own code, not the kill's
+            _release(worker, children, kill=True)
+            raise IsolatedFailure(Reason.CRASHED.value, f"the {what} process died (exit code {code})") from None
+    except OSError as exc:  # the worker could not be started (no memory, no processes left)
+        if worker is not None:
+            _release(worker, children, kill=True)
+        raise IsolatedFailure(Reason.CRASHED.value, f"cannot start a {what} process: "
+                              f"{type(exc).__name__}: {exc}") from None
+    _release(worker, children, kill=False)
+    if kind != "ok":
+        raise IsolatedFailure("error", f"the {what} worker cannot load its task ({reply}); "
+                              "the step must be importable by module (not defined in __main__)")
+    return reply
+
+
 def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path | None, timeout_s: float, *,
                      remedy: str = "raise the time limit and rerun", step: Step = process_object,
                      children: Children | None = None) -> ProcessedObject:
@@ -108,41 +163,11 @@ def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path 
         ref = entry.ref()  # inside its source root (the path only: no byte is read here)
     except ObjectError as exc:
         return _failed(entry, exc.reason.value, str(exc))
-    worker = None
     try:
-        for _ in range(2):  # an idle worker can have died since (Ctrl-C, OOM): one fresh retry
-            worker = isolated_worker.take()
-            if children is not None:
-                children._add(worker)
-            try:
-                worker.wait_ready()  # its start (imports) is not the object's time
-                worker.submit((_reply, (step, entry, cfg.to_dict(), str(cache_root(root)))))
-                break
-            except (BrokenPipeError, ConnectionResetError, EOFError, TimeoutError):
-                _release(worker, children, kill=True)
-                worker = None
-        if worker is None:
-            return _failed(entry, Reason.CRASHED.value, f"{entry.id}: no processing worker could be started")
-        try:
-            kind, reply = worker.result(timeout_s)
-        except TimeoutError:
-            _release(worker, children, kill=True)
-            return _failed(entry, Reason.TIMEOUT.value,
-                           f"{entry.id}: processing exceeded {timeout_s:g} s and was killed ({remedy})")
-        except (EOFError, ConnectionResetError):
-            code = worker.exitcode()  # it is exiting: its own code, not the kill's
-            _release(worker, children, kill=True)
-            return _failed(entry, Reason.CRASHED.value, f"{entry.id}: the processing process died "
-                           f"(exit code {code})")
-    except OSError as exc:  # the worker could not be started (no memory, no processes left)
-        if worker is not None:
-            _release(worker, children, kill=True)
-        return _failed(entry, Reason.CRASHED.value, f"{entry.id}: cannot start a processing process: "
-                       f"{type(exc).__name__}: {exc}")
-    _release(worker, children, kill=False)
-    if kind != "ok":
-        return _failed(entry, "error", f"{entry.id}: the processing worker cannot load its task ({reply}); "
-                       "the step must be importable by module (not defined in __main__)")
+        reply = call_isolated(_reply, (step, entry, cfg.to_dict(), str(cache_root(root))), timeout_s,
+                              remedy=remedy, children=children)
+    except IsolatedFailure as exc:
+        return _failed(entry, exc.reason, f"{entry.id}: {exc.detail}")
     status, reason, message, path, cache_hit = reply
     if status != "ok":
         out = _failed(entry, reason, message)

@@ -28,7 +28,7 @@ from multiprocessing.connection import Connection
 
 from datagen._interrupt import sigint_blocked
 
-__all__ = ["IsolatedWorker", "MAX_TASKS", "give", "serve", "take"]
+__all__ = ["IsolatedWorker", "MAX_TASKS", "close_idle", "give", "serve", "take"]
 
 MAX_TASKS = 100  #: objects one worker serves before it is replaced
 START_TIMEOUT_S = 300.0  #: how long a new worker may take to import the processing code (a loaded machine)
@@ -117,7 +117,7 @@ def take() -> IsolatedWorker:
                 return w
             w.close()
         if not _registered:
-            atexit.register(_shutdown)
+            atexit.register(close_idle)
             _registered = True
     return IsolatedWorker()
 
@@ -131,7 +131,9 @@ def give(w: IsolatedWorker) -> None:
         _idle.append(w)
 
 
-def _shutdown() -> None:
+def close_idle() -> None:
+    """End every idle worker of this process (the next `take` starts a new one, with this
+    process's environment as it is then)."""
     with _lock:
         workers, _idle[:] = list(_idle), []
     for w in workers:

@@ -77,6 +77,7 @@ def render() -> str:
     """The page's markdown."""
     from datagen.eval.config import EvalConfig
     from datagen.objects.config import ProcessConfig
+    from datagen.objects.observations import ObservationConfig
     from datagen.synth.config import EnergyWeights, SynthConfig
     from datagen.wrench.contact import ContactModel
 
@@ -103,6 +104,9 @@ def render() -> str:
     md += ["### `synth.weights` (`EnergyWeights`)", ""] + _table(EnergyWeights, "weights.")
     md += ["## `eval`: the MuJoCo tests (`EvalConfig`)", ""] + _table(EvalConfig, "")
     md += ["## `process`: object processing (`ProcessConfig`)", ""] + _table(ProcessConfig, "")
+    md += ["## `observations`: what a learner sees of each object (`ObservationConfig`, a job's field)", "",
+           "Written to `observations/part-NNNNN.parquet` beside each shard (schema `schemas/observations.json`; "
+           "docs/learning.md).", ""] + _table(ObservationConfig, "")
     return "\n".join(md)
 
 

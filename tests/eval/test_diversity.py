@@ -101,3 +101,22 @@ def test_grasp_diversity_of_rows():
     assert d.joint_entropy == pytest.approx(joint_entropy(rows[:, 7:], np.zeros(4), np.ones(4)))
     empty = grasp_diversity(np.zeros((0, 11)), np.zeros(4), np.ones(4))
     assert empty.n == 0 and math.isnan(empty.joint_entropy)
+
+
+def test_grouped_diversity_hand_cases():
+    from datagen.eval.diversity import grouped_diversity
+
+    lo, hi = np.array([0.0, 0.0]), np.array([3.2, 2.0])
+    still = _row([0.0, 0.0, 0.1], [1.0, 0, 0, 0], [1.0, 1.0])
+    rows = np.stack([_row([0.1, 0.0, 0.0], [1.0, 0, 0, 0], [0.0, 1.0]), still, still,
+                     _row([-0.1, 0.0, 0.0], [1.0, 0, 0, 0], [3.2, 1.0])])
+    keys = [("fc", 0.08), ("fc", 0.06), ("fc", 0.06), ("fc", 0.08)]
+    (k1, d1), (k2, d2) = grouped_diversity(rows, keys, lo, hi)
+    assert (k1, k2) == (("fc", 0.06), ("fc", 0.08))  # sorted keys
+    # 0.06: two identical grasps: no variance (PCA undefined), every joint in one bin
+    assert d1.n == 2 and np.all(np.isnan(d1.pca)) and d1.joint_entropy == 0.0
+    # 0.08: two grasps differing along one direction: the first component explains everything;
+    # joint 1 in two bins (ln 2), joint 2 in one (0)
+    assert d2.n == 2 and d2.pca == pytest.approx((1.0,) * 5) and d2.joint_entropy == pytest.approx(math.log(2) / 2)
+    with pytest.raises(ValueError):
+        grouped_diversity(rows, keys[:3], lo, hi)

@@ -101,6 +101,18 @@ def _interrupted_command(tmp, capsys, monkeypatch, where: tuple[str, str], args:
     return code, capsys.readouterr().err
 
 
+def _no_gl_run(tmp, capsys, monkeypatch):
+    import datagen.gl
+    from datagen.objects import observations
+
+    def no_gl():
+        raise datagen.gl.GLUnavailable("no offscreen OpenGL backend works here: egl: libEGL not found (...)")
+
+    monkeypatch.setattr(datagen.gl, "select_backend", no_gl)
+    monkeypatch.setattr(observations, "_resolved", {})
+    return _run(tmp, capsys, config="observations: {renderer: mujoco}\n")
+
+
 def _different_job(tmp, capsys):
     JobDir(tmp / "job").init(tiny_config(_src(tmp), seed=5))
     return _run(tmp, capsys)
@@ -214,6 +226,8 @@ COMMANDS = {
     "`run --manifest missing.jsonl`": lambda t, c, m: _run(t, c, "--manifest", str(t / "missing.jsonl")),
     "config `grasps_per_object: many`": lambda t, c, m: _run(t, c, config="grasps_per_object: many\n"),
     "config `cuont: 3`": lambda t, c, m: _run(t, c, config="cuont: 3\n"),
+    "config `observations: {renderer: opengl}`": lambda t, c, m: _run(t, c, config="observations: {renderer: opengl}\n"),
+    "config `observations: {renderer: mujoco}` without OpenGL": lambda t, c, m: _no_gl_run(t, c, m),
     "config with a `!!python/...` tag": lambda t, c, m: _run(
         t, c, config="hand: !!python/object/apply:os.getcwd []\n"),
     "config with YAML aliases": lambda t, c, m: _run(

@@ -143,6 +143,10 @@ def test_a_rerun_redoes_exactly_the_damaged_shards(job, pristine, mesh_source, c
     assert "0 done, 3 to run" in said[4]
     assert status["complete"] and not status["damaged"]
     assert comparable_rows(job.path) == pristine[1]  # the same seeds: the same rows
+    observed = sorted((pristine[0] / "observations").glob("*.parquet"))
+    assert [p.name for p in observed] == ["part-00000.parquet", "part-00001.parquet"]
+    for p in observed:  # and the same observations (depth images included)
+        assert pq.read_table(job.path / "observations" / p.name).equals(pq.read_table(p)), p.name
     assert cli.main(["verify", str(job.path)]) == 0
 
 
