@@ -1,7 +1,7 @@
 """Isolated object processing: a worker interpreter reused across objects against a fresh one per
 object -> benchmarks/results/isolation.md.
 
-The job's processing (`workers.job.FAST_PROCESS`, CoACD seeded) of N procedural objects, each
+The job's processing (the `dataset` preset's, CoACD seeded) of N procedural objects, each
 through `datagen.objects.isolate.process_isolated`, serially, from an empty cache: once with
 the workers reused (the default, `isolated_worker.MAX_TASKS` objects each) and once with a fresh
 worker interpreter per object (``MAX_TASKS = 1``, the cost of per-object isolation before the
@@ -81,7 +81,7 @@ def main() -> None:
     base = statistics.median(walls["fresh interpreter per object"])
     lines = ["# Isolated object processing: reused worker against a fresh interpreter per object", "",
              f"Machine: {machine_description()}", "", f"Commit {code_version()}.", "",
-             f"{args.objects} procedural objects, the job's processing config (FAST_PROCESS), serial, empty cache "
+             f"{args.objects} procedural objects, the job's processing config (the dataset preset's), serial, empty cache "
              f"each run; {args.repeats} alternating runs per mode, medians.", "",
              "| mode | wall for all objects (s) | runs (s) | per object, median (s) | x fresh |", "|---|---|---|---|---|"]
     for m in modes:

@@ -115,7 +115,7 @@ def _shard_phase(out: Path) -> float:
 
 def _prepared_job(path: Path, cfg: JobConfig) -> list[dict]:
     """A job directory at ``path`` with its manifest written; the shard entries as `run_shard` takes them."""
-    from workers.run import prepare_manifest
+    from workers.setup import prepare_manifest
 
     job = JobDir(path)
     job.lock()

@@ -19,7 +19,8 @@ import pyarrow.parquet as pq
 import torch
 
 from workers.job import PREFERRED_PER_SHARD, JobConfig, JobDir, shard_slices
-from workers.run import merge_failures, prepare_manifest
+from workers.finished import merge_failures
+from workers.setup import prepare_manifest
 from workers.shard import run_shard
 
 

@@ -22,6 +22,9 @@ is still importing waits until `on_sigint` sets its policy: pending, it then end
 Native code that runs its own threads (SciPy's ``cKDTree.query(workers=-1)``) must not be left by
 a KeyboardInterrupt: its threads would go on with freed arrays and crash the interpreter as it
 exits. `sigint_deferred` holds a Ctrl-C until such a call has returned.
+
+SIGTERM stops a command as Ctrl-C does (`raise_on_sigterm`: a `Terminated` KeyboardInterrupt),
+with its own line and exit code 143.
 """
 
 from __future__ import annotations
@@ -32,7 +35,33 @@ import signal
 import threading
 from typing import Iterator
 
-__all__ = ["on_sigint", "sigint_blocked", "sigint_deferred"]
+__all__ = ["Terminated", "on_sigint", "raise_on_sigterm", "sigint_blocked", "sigint_deferred", "was_terminated"]
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill PID``, a scheduler stopping the job) in a command's main thread: handled
+    like Ctrl-C (the command's cleanup runs, one line, no traceback), exit 143."""
+
+
+_terminated = threading.Event()
+
+
+def _terminate(signum, frame):
+    _terminated.set()
+    raise Terminated
+
+
+def raise_on_sigterm() -> None:
+    """In a command's main thread: SIGTERM raises `Terminated`. Called again after a library that
+    installs its own handler (``ray.init`` makes it ``sys.exit(15)``)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
+
+
+def was_terminated() -> bool:
+    """Whether SIGTERM arrived: native code that catches the interrupt and raises its own
+    KeyboardInterrupt (Ray's ``ray.wait``) loses the `Terminated` type."""
+    return _terminated.is_set()
 
 
 @contextlib.contextmanager
@@ -48,9 +77,12 @@ def sigint_blocked() -> Iterator[None]:
 
 def on_sigint(policy: str) -> None:
     """In a child process (its main thread), first thing: ``"die"`` or ``"ignore"`` on SIGINT (see
-    the module docstring), then unblock it."""
+    the module docstring), then unblock it. SIGTERM gets its default action back (a forked child
+    inherits the command's `raise_on_sigterm`, and ``Pool.terminate`` ends its workers with
+    SIGTERM: they must die quietly, not raise)."""
     if policy not in ("die", "ignore"):
         raise ValueError(f"on_sigint: policy must be 'die' or 'ignore', got {policy!r}")
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_DFL if policy == "die" else signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 

@@ -3,7 +3,9 @@
 To add a subcommand, write ``register(sub)`` in your package (it calls ``sub.add_parser`` and
 sets ``func`` to a handler taking the parsed args and returning an exit code, and ``interrupted``
 to what a Ctrl-C leaves and how to go on, formatted with the parsed args: see `interrupted_line`)
-and add one line to ``REGISTRARS``. Only the registrar of the command being run is imported (all of them for
+and add one line to ``REGISTRARS`` (a library package) or an entry point of group `PLUGIN_GROUP`
+in pyproject.toml (the job commands of `workers/`, a layer above the library, which the library
+never names). Only the registrar of the command being run is imported (all of them for
 ``datagen --help``), so one package's heavy imports never slow another's subcommand. Every
 option has a help text; the help shows its default (`HelpFormatter`).
 """
@@ -18,7 +20,7 @@ import sys
 
 import datagen
 
-__all__ = ["REGISTRARS", "HelpFormatter", "Parser", "build_parser", "install_log_handler", "interrupted_line", "main"]
+__all__ = ["PLUGIN_GROUP", "REGISTRARS", "registrars", "HelpFormatter", "Parser", "build_parser", "install_log_handler", "interrupted_line", "main"]
 
 # subcommand name -> "module:function" registering it
 REGISTRARS: dict[str, str] = {
@@ -30,15 +32,23 @@ REGISTRARS: dict[str, str] = {
     "synth": "datagen.pipeline.commands:register_synth",
     "eval": "datagen.eval.commands:register_eval",
     "render": "datagen.eval.commands:register_render",
-    "run": "workers.cli:register_run",
-    "status": "workers.cli:register_status",
-    "report": "workers.cli:register_report",
     "export": "datagen.interop.commands:register_export",
     "import": "datagen.interop.commands:register_import",
     "view": "datagen.view.commands:register_view",
 }
-# domain errors printed as one line with exit status 2 (module:class, looked up only if imported)
-_ERRORS = ("datagen.objects.errors:ObjectError", "workers.job:JobError", "datagen.gl:GLUnavailable")
+# Commands of the layers above the library (the job commands of `workers/`) plug in through the
+# entry points of this group (pyproject.toml): the library never names them.
+PLUGIN_GROUP = "datagen.commands"
+# domain errors printed as one line with exit status 2 (module:class, looked up only if imported);
+# every `datagen.errors.DatagenError` is one too
+_ERRORS = ("datagen.gl:GLUnavailable",)
+
+
+def registrars() -> dict[str, str]:
+    """Subcommand name -> "module:function": the library's `REGISTRARS`, then the plugins'."""
+    from importlib.metadata import entry_points
+
+    return {**REGISTRARS, **{ep.name: ep.value for ep in entry_points(group=PLUGIN_GROUP) if ep.name not in REGISTRARS}}
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -66,7 +76,7 @@ def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
                     "check them in MuJoCo, write Parquet datasets. `datagen COMMAND -h` for a command's options.")
     parser.add_argument("--version", action="version", version=f"datagen {datagen.__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
-    for name, target in REGISTRARS.items():
+    for name, target in registrars().items():
         if commands is None or name in commands:
             module, _, func = target.partition(":")
             getattr(importlib.import_module(module), func)(sub)
@@ -77,7 +87,7 @@ def _command(argv: list[str]) -> list[str] | None:
     """The subcommand named in ``argv`` (to register only it), [] for a bare ``--version``, None
     (register all) otherwise."""
     first = next((a for a in argv if not a.startswith("-")), None)
-    if first in REGISTRARS:
+    if first in registrars():
         return [first]
     if first is None and "--version" in argv and not {"-h", "--help"} & set(argv):
         return []
@@ -85,7 +95,9 @@ def _command(argv: list[str]) -> list[str] | None:
 
 
 def _domain_errors() -> tuple[type[BaseException], ...]:
-    out: list[type[BaseException]] = [ValueError, FileNotFoundError]
+    from datagen.errors import DatagenError
+
+    out: list[type[BaseException]] = [ValueError, FileNotFoundError, DatagenError]
     for target in _ERRORS:
         module, _, name = target.partition(":")
         if module in sys.modules:  # a module never imported cannot have raised its error
@@ -121,7 +133,7 @@ def install_log_handler() -> None:
 def interrupted_line(args: argparse.Namespace | None, argv: list[str]) -> str:
     """The one line a Ctrl-C prints: the command, ``interrupted``, and its ``interrupted`` default
     (what was kept, how to go on) formatted with the parsed arguments."""
-    command = args.command if args is not None else next((a for a in argv if a in REGISTRARS), "")
+    command = args.command if args is not None else next((a for a in argv if a in registrars()), "")
     what = getattr(args, "interrupted", None)
     if what:
         what = what.format(**vars(args))
@@ -132,11 +144,14 @@ def interrupted_line(args: argparse.Namespace | None, argv: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit code. A domain error is one line and exit 2; Ctrl-C is one line
-    (`interrupted_line`) and exit 130, the shell's code for SIGINT. Outputs are written atomically
-    (`datagen._atomic`), so an interrupted command leaves no half-written file."""
+    (`interrupted_line`) and exit 130, the shell's code for SIGINT (SIGTERM: "terminated", 143).
+    Outputs are written atomically (`datagen._atomic`), so an interrupted command leaves no
+    half-written file."""
+    from datagen._interrupt import Terminated, raise_on_sigterm, was_terminated
     from datagen.gl import drop_unusable
 
     install_log_handler()
+    raise_on_sigterm()
 
     drop_unusable()  # a MUJOCO_GL that would make `import mujoco` fail is dropped, with a warning
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -148,9 +163,13 @@ def main(argv: list[str] | None = None) -> int:
         except _domain_errors() as exc:
             print(f"datagen {args.command}: error: {exc}", file=sys.stderr)
             return 2
-    except KeyboardInterrupt:
-        print("\n" + interrupted_line(args, argv), file=sys.stderr)  # after a progress bar's line
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (`Terminated`)
+        line = interrupted_line(args, argv)
+        terminated = isinstance(exc, Terminated) or was_terminated()
+        if terminated:
+            line = line.replace(": interrupted;", ": terminated (SIGTERM);", 1)
+        print("\n" + line, file=sys.stderr)  # after a progress bar's line
+        return 143 if terminated else 130
     except BrokenPipeError:  # stdout closed early (`datagen hands | head -1`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit's flush
         return 141  # the shell's code for SIGPIPE, as a command killed by it

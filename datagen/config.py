@@ -28,9 +28,10 @@ from typing import Any, ClassVar, TypeVar, Union
 
 import yaml
 
+from datagen import _bounded
 from datagen.errors import ConfigError
 
-__all__ = ["Config", "check_types", "from_mapping", "stable_hash", "to_plain"]
+__all__ = ["Config", "check_types", "from_mapping", "read_yaml", "stable_hash", "to_plain"]
 
 C = TypeVar("C", bound="Config")
 
@@ -48,13 +49,12 @@ class Config:
 
     @classmethod
     def from_yaml(cls: type[C], path: str | Path) -> C:
-        """Build from a YAML file holding one mapping of this class's fields."""
+        """Build from a YAML file holding one mapping of this class's fields (read by `read_yaml`:
+        a regular file of at most 1 MiB, plain data, no aliases, no key twice)."""
         try:
-            data = yaml.safe_load(Path(path).read_text())
-        except OSError as exc:
-            raise cls.config_error.make(str(path), f"cannot read the file: {exc}") from None
-        except yaml.YAMLError as exc:
-            raise cls.config_error.make(str(path), f"not valid YAML ({exc})") from None
+            data = read_yaml(path, f"{cls.__name__} file")
+        except ValueError as exc:
+            raise cls.config_error.make(str(path), str(exc).removeprefix(f"{path}: ")) from None
         return cls.from_dict(data, where=str(path))
 
     def to_dict(self) -> dict[str, Any]:
@@ -64,6 +64,48 @@ class Config:
     def hash(self) -> str:
         """sha256 (hex) of the canonical JSON of `to_dict`: equal configs, equal hashes."""
         return stable_hash(self.to_dict())
+
+
+class _PlainLoader(yaml.SafeLoader):
+    """SafeLoader without aliases (``*ref`` can expand a few hundred bytes into gigabytes) and
+    without a key given twice in one mapping (YAML would keep the last one silently)."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not allowed in a config", mark)
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.get(key)
+                seen[key] = key_node.start_mark.line + 1
+            except TypeError:  # an unhashable key: the base class names it
+                break
+            if first is not None:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} given twice (lines {first} and {seen[key]}): remove one")
+        return super().construct_mapping(node, deep)
+
+
+def read_yaml(path: str | Path, what: str = "config"):
+    """The YAML document at ``path`` as plain data (mappings, lists, scalars). Raises ValueError
+    (`datagen._bounded.InputError` for the file itself) naming the file and the reason: a missing
+    file, one that is not a regular file (a device, a FIFO: refused before reading), over 1 MiB,
+    not UTF-8, invalid YAML, language tags (``!!python/...``), aliases, a key given twice."""
+    text = _bounded.read_text(path, _bounded.CONFIG_BYTES, what)
+    try:
+        return yaml.load(text, Loader=_PlainLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        detail = " ".join(str(exc).split())
+        plain = isinstance(exc, (yaml.constructor.ConstructorError, yaml.composer.ComposerError))
+        raise ValueError(f"{path}: the {what} is " + ("not plain YAML data" if plain else "not valid YAML")
+                         + f": {detail}") from None
+    except RecursionError:
+        raise ValueError(f"{path}: the {what} is nested too deeply") from None
 
 
 def to_plain(value: Any) -> Any:

@@ -112,3 +112,20 @@ def test_every_datagen_error_survives_pickling():
     for exc in made:
         back = pickle.loads(pickle.dumps(exc))
         assert type(back) is type(exc) and str(back) == str(exc) and back.__dict__ == exc.__dict__, exc
+
+
+def test_a_key_given_twice_is_refused_not_last_wins(tmp_path):
+    from datagen.config import read_yaml
+    from datagen.synth import SynthConfig
+
+    p = tmp_path / "c.yaml"
+    for text, where in (("iters: 10\niters: 20\n", "lines 1 and 2"), ("weights: {distance: 1, distance: 2}\n",
+                                                                        "lines 1 and 1")):
+        p.write_text(text)
+        with pytest.raises(ValueError, match=rf"c.yaml: the config is not plain YAML data: key '\w+' given twice "
+                                             rf"\({where}\): remove one"):
+            read_yaml(p)
+        with pytest.raises(ConfigError, match="given twice"):
+            SynthConfig.from_yaml(p)
+    p.write_text("a: {x: 1}\nb: {x: 2}\n")  # the same key in two mappings is fine
+    assert read_yaml(p) == {"a": {"x": 1}, "b": {"x": 2}}

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # rank of each top-level part of `datagen`; a module may import only strictly lower ranks
 # (and its own package). The root `datagen/__init__.py` is the curated facade over all of them.
 RANK = {
-    "errors": 0,
+    "errors": 0, "_bounded": 0.5,  # bounded reads of user files: only errors below it, config above
     "config": 1, "_atomic": 1, "_interrupt": 1, "rotation": 1, "scatter": 1, "gl": 1,
     "wrench": 2, "hands": 2, "objects": 2,
     "tasks": 3, "io": 3,
@@ -90,3 +90,22 @@ def test_the_curated_api_resolves_lazily():
     assert len(datagen.__all__) >= 10
     for name in datagen.__all__:
         assert getattr(datagen, name) is not None, name
+
+
+@pytest.mark.parametrize("path", _library_modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_library_module_names_a_module_of_the_layers_above(path):
+    """Not even as a string (an import by name, a registrar): the job commands plug in through the
+    entry points of `datagen.cli.PLUGIN_GROUP` in pyproject.toml."""
+    import re
+
+    strings = [n.value for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str)]
+    named = [s for s in strings if re.match(r"^(workers|benchmarks)\.[a-z_]+(:|$)", s)]
+    assert not named, f"{path} names {named}"
+
+
+def test_the_job_commands_plug_into_the_command_line():
+    from datagen.cli import registrars
+
+    assert {"run", "status", "verify", "report"} <= set(registrars())
+    assert registrars()["run"] == "workers.cli:register_run"

@@ -1,4 +1,4 @@
-"""CLI: ``datagen run``, ``datagen status JOB_DIR``, ``datagen report JOB_DIR``."""
+"""CLI: ``datagen run``, ``datagen status JOB_DIR``, ``datagen verify JOB_DIR``, ``datagen report JOB_DIR``."""
 
 from __future__ import annotations
 
@@ -8,13 +8,16 @@ import sys
 
 from datagen.pipeline.commands import add_recipe_arguments, recipe_flags
 
-__all__ = ["register_run", "register_status", "register_report"]
+__all__ = ["register_run", "register_status", "register_report", "register_verify"]
 
 
 def register_run(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run or resume a dataset job (Ray)")
     p.add_argument("--out", default="jobs/default", help="job directory (created; resumed if it exists)")
     p.add_argument("--config", default=None, help="YAML of JobConfig fields (flags below override it)")
+    p.add_argument("--resume", action="store_true",
+                   help="resume the job in --out with the config its job.json records (no --config needed; flags "
+                        "may change only the execution settings, e.g. --object-timeout)")
     p.add_argument("--objects", type=int, default=None, dest="count",
                    help="number of objects (JobConfig.count; default 6). Not an object size: object sizes "
                         "are JobConfig.scales, metres")
@@ -33,7 +36,7 @@ def register_run(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="base seed; shard k synthesizes with seed + k (default: 0)")
     add_recipe_arguments(p)
     p.add_argument("--address", default=None, help="Ray cluster address (default $RAY_ADDRESS, else local)")
-    p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores)")
+    p.add_argument("--num-cpus", type=int, default=None, help="local Ray CPUs (default: all cores; at least 1)")
     p.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     p.add_argument("--object-timeout", type=float, default=None, metavar="SECONDS",
                    help="per-object processing limit (JobConfig.object_timeout_s, default 300); an execution "
@@ -63,14 +66,21 @@ def _renamed_scale(value: str):
 
 
 def _config(args):
-    from datagen.objects.config import read_yaml
+    from datagen.config import read_yaml
 
     from .job import JobConfig, JobError
 
-    try:
-        data = read_yaml(args.config, "job config") if args.config else {}
-    except ValueError as exc:
-        raise JobError(str(exc)) from None
+    if args.resume:
+        if args.config:
+            raise JobError("--resume takes the job's config from its job.json: drop --config")
+        from .job import JobDir
+
+        data = JobDir(args.out).read_job()["config"]
+    else:
+        try:
+            data = read_yaml(args.config, "job config") if args.config else {}
+        except ValueError as exc:
+            raise JobError(str(exc)) from None
     if data is not None and not isinstance(data, dict):
         raise JobError(f"{args.config}: a job config must be a mapping of JobConfig fields")
     data = dict(data or {})
@@ -89,7 +99,8 @@ def _config(args):
         if data.get("synth") is not None and not isinstance(data["synth"], dict):
             raise JobError(f"{args.config}: synth must be a mapping of SynthConfig fields")
         data["synth"] = {**(data.get("synth") or {}), **flags["synth"]}
-    return JobConfig.from_dict(data, where=args.config or "command line")
+    where = f"{args.out}/job.json" if args.resume else args.config or "command line"
+    return JobConfig.from_dict(data, where=where)
 
 
 def closing_summary(status: dict) -> str:
@@ -118,7 +129,20 @@ def closing_summary(status: dict) -> str:
     return "\n".join(lines)
 
 
+def _check_inputs(args) -> None:
+    """--config and --manifest are regular files within their caps: a device or a FIFO is refused
+    at once, before the imports of a job (torch, Ray: seconds)."""
+    from datagen import _bounded
+    from datagen.objects.errors import check_manifest_file
+
+    if args.config:
+        _bounded.check_regular(args.config, _bounded.CONFIG_BYTES, "job config")
+    if args.manifest:
+        check_manifest_file(args.manifest)
+
+
 def _run(args) -> int:
+    _check_inputs(args)
     from .job import JobError
     from .run import run_job
     from .status import format_status
@@ -128,7 +152,7 @@ def _run(args) -> int:
                          cache=args.cache, progress=not args.no_progress, retry_failed=args.retry_failed)
     except JobError as exc:
         print(f"datagen run: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_code", 2)  # 1 for a job that could not write (JobIOError)
     print(format_status(status))
     print(closing_summary(status))
     return 0 if status["complete"] else 1
@@ -154,6 +178,26 @@ def _status(args) -> int:
     return 0
 
 
+def register_verify(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("verify", help="check every file of a job against the sha256 its ledger records")
+    p.add_argument("job", help="job directory")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_verify, interrupted="nothing was written")
+
+
+def _verify(args) -> int:
+    from .job import JobError
+    from .verify import format_verify, verify_job
+
+    try:
+        v = verify_job(args.job)
+    except JobError as exc:
+        print(f"datagen verify: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(v, indent=1) if args.json else format_verify(v))
+    return 1 if v["problems"] else 0
+
+
 def register_report(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="write a dataset card (JOB_DIR/README.md) with rendered grasps")
     p.add_argument("job", help="job directory")
@@ -171,6 +215,6 @@ def _report(args) -> int:
         path = write_report(args.job, renders=args.renders)
     except JobError as exc:
         print(f"datagen report: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_code", 2)
     print(f"wrote {path}")
     return 0

@@ -1,20 +1,8 @@
 """A job directory: its config, lock, manifest slice, shard layout and ledger of finished shards.
 
-Layout (names are the constants below; paths relative to the job directory)::
-
-    job.json                  the full JobConfig, its hash, code and package versions, created_at
-    manifest.jsonl            the manifest slice of this job (objects in shard order)
-    shards/part-NNNNN.parquet grasp rows of shard N (`evaluated` schema), written to a temp name
-                              and renamed; absent for a finished shard without rows
-    failures/part-NNNNN.parquet  failed objects/stages of shard N (`failures` schema)
-    failures.parquet          all failures (merged at the end of a run, and by `datagen status`)
-    objects/<entry>/          processed objects the rows refer to (hard links into the cache)
-    failures/manifest.parquet objects of the source that the manifest cannot hold (stage `manifest`)
-    ledger/part-NNNNN.json    written last for a finished shard: its counts and timings
-    hands/<name>.yaml         the job's hand spec, pinned with its asset's hash (`workers.run.pin_job_hand`)
-    progress/part-NNNNN.json  a running shard's progress (polled by the driver)
-    .lock                     flock held by the running driver
-    ray/                      Ray's temp dir when the path is short enough (else /tmp/dg-ray-*)
+The directory's layout is `datagen.io.layout`'s (one owner: the readers share it); job.json here
+records the full JobConfig, its resolved recipes and hash, code and package versions. Ray's temp
+dir is ``ray/`` when the path is short enough (else /tmp/dg-ray-*, `workers.cluster`).
 
 A job is resumable: re-running the same config skips the shards with a ledger entry and redoes
 the others (their outputs are overwritten atomically). A different config is refused; the
@@ -23,12 +11,16 @@ execution settings (`EXECUTION_FIELDS`: object time limit, resources per shard) 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import errno
 import fcntl
 import hashlib
 import json
 import os
 import platform
+import re
+import shutil
 import socket
 import subprocess
 import time
@@ -37,20 +29,20 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping
 
 
+from datagen import _bounded
 from datagen._atomic import atomic_write_text
+from datagen.io import integrity
 from datagen.objects.manifest import NATIVE
 from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
 from datagen.pipeline.recipe import DEFAULT_PRESET, resolve
-from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, OBJECTS_DIR,
-                               SHARD_NAME, SHARDS_DIR)
+from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, MANIFEST_FAILURES,
+                               OBJECTS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
 
-__all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "code_version", "package_versions",
-           "shard_size", "shard_slices"]
+__all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "JobIOError", "code_version",
+           "package_versions", "shard_size", "shard_slices", "writing"]
 
 
-PROGRESS_DIR = "progress"              # progress/part-NNNNN.json: a running shard's progress
-MANIFEST_FAILURES = "manifest.parquet"  # failures/manifest.parquet: objects the manifest could not hold
 
 
 class JobError(DatagenError, RuntimeError):
@@ -59,6 +51,41 @@ class JobError(DatagenError, RuntimeError):
 
 class JobConfigError(ConfigError, JobError):
     """A malformed job config (unknown key, wrong type), from the config helper: a `JobError`."""
+
+
+class JobIOError(JobError):
+    """A job file that cannot be written (a full disk, a quota, a read-only file system): not a
+    usage error, so the command exits 1. Names the path, the cause and the remedy."""
+
+    exit_code = 1
+
+
+def _errno_of(exc) -> int | None:
+    """The errno of an OSError, also of pyarrow's (which carry it only in their text)."""
+    code = getattr(exc, "errno", None)
+    if isinstance(code, int):
+        return code
+    m = re.search(r"\[errno (\d+)\]", str(exc), re.I)
+    return int(m.group(1)) if m else None
+
+
+@contextlib.contextmanager
+def writing(path: str | Path, what: str = "the job file"):
+    """Turn an OSError raised while writing ``path`` into a `JobIOError` naming it (one line: the
+    path, the cause, what to do). The writes under it are atomic: nothing half-written stays."""
+    try:
+        yield
+    except OSError as exc:
+        code = _errno_of(exc)
+        cause = os.strerror(code) if code else " ".join(str(exc).split())
+        if code in (errno.ENOSPC, errno.EDQUOT):
+            remedy = (f"free space on the file system holding {Path(path).parent} (`df -h {Path(path).parent}`) "
+                      "and rerun the same command: finished shards are kept, the others are redone")
+        elif code == errno.EROFS:
+            remedy = "the file system is read-only: choose another --out"
+        else:
+            remedy = "fix the permissions or choose another --out, then rerun the same command"
+        raise JobIOError(f"cannot write {what} {path}: {cause}", remedy) from None
 
 
 # fields that say how a job runs, not what it produces: outside the config hash, so a resumed
@@ -145,6 +172,8 @@ class JobConfig(Config):
         try:
             self.recipes()  # validates the settings now, not in a worker
         except (ValueError, TypeError) as exc:
+            if not self._inputs_readable():
+                return  # a task or hand spec this machine cannot read: `check_runnable` names it
             raise JobError(f"JobConfig: {exc}") from None
 
     def recipes(self) -> list:
@@ -159,8 +188,6 @@ class JobConfig(Config):
         cannot load, before any work starts; returns the loaded hand (`load_hand`). Not part of
         construction: ``datagen status`` reads job.json on machines that may lack a hand's asset
         package."""
-        from datagen.tasks import builtin_tasks, load_task
-
         hand = self.load_hand()
         from datagen.objects.errors import ObjectError
         from datagen.objects.manifest import load_manifest
@@ -175,6 +202,26 @@ class JobConfig(Config):
                     raise JobError(f"source {self.source!r}: {root} is not a folder")
         except ObjectError as exc:
             raise JobError(str(exc)) from None
+        self.check_tasks()
+        return hand
+
+    def _inputs_readable(self) -> bool:
+        """Whether every task loads and the hand is a built-in name or an existing spec file."""
+        from datagen.hands import BUILTIN_HANDS
+        from datagen.tasks import load_task
+
+        try:
+            for t in self.tasks:
+                load_task(t)
+        except Exception:  # noqa: BLE001 - any task problem: the inputs are not readable here
+            return False
+        return self.hand in BUILTIN_HANDS or Path(self.hand).is_file()
+
+    def check_tasks(self) -> None:
+        """Refuse (JobError) a task that cannot be loaded: an unknown name with the valid ones, a
+        bad task YAML with its first error."""
+        from datagen.tasks import builtin_tasks, load_task
+
         for t in self.tasks:
             try:
                 load_task(t)
@@ -184,7 +231,6 @@ class JobConfig(Config):
                     raise JobError(f"task {t!r}: {first}") from None
                 raise JobError(f"unknown task {t!r}; valid tasks: {', '.join(builtin_tasks())} "
                                "(or the path of a task YAML)") from None
-        return hand
 
     def load_hand(self):
         """The job's hand (`datagen.hands.HandModel`), loaded as a shard loads it: the spec read,
@@ -212,7 +258,7 @@ class JobConfig(Config):
     @classmethod
     def from_yaml(cls, path: str | Path) -> "JobConfig":
         """From a YAML mapping; tags, aliases and files over 1 MiB are refused (`read_yaml`)."""
-        from datagen.objects.config import read_yaml
+        from datagen.config import read_yaml
 
         try:
             data = read_yaml(path, "job config")
@@ -334,10 +380,21 @@ class JobDir:
 
     # ------------------------------------------------------------- config
     def read_job(self) -> dict:
+        """job.json; `JobError` naming it (and the remedy) when it is missing, empty or truncated."""
         p = self.path / JOB_JSON
         if not p.is_file():
             raise JobError(f"{self.path} is not a job directory (no {JOB_JSON})")
-        return json.loads(p.read_text())
+        try:
+            doc = _bounded.read_json(p, "job file")
+            if not isinstance(doc, dict) or not isinstance(doc.get("config"), dict):
+                raise _bounded.InputError(p, _bounded.NOT_TEXT, "the job file holds no job config")
+        except _bounded.InputError as exc:
+            hashes = sorted(self.recorded_hashes())
+            known = f" (its shards record config hash {hashes[0][:12]})" if len(hashes) == 1 else ""
+            raise JobError(str(exc), f"restore it from a copy, or rerun `datagen run --out {self.path}` with the job's "
+                           f"original settings{known}: when they match what its shards record, {JOB_JSON} is "
+                           "written again") from None
+        return doc
 
     def config(self) -> JobConfig:
         return JobConfig.from_dict(self.read_job()["config"], where=str(self.path / JOB_JSON))
@@ -350,8 +407,10 @@ class JobDir:
             raise JobError(f"job {self.path}: objects_per_shard 'auto' must be resolved to a number before the "
                            "job is created (workers.run.run_job does it; or pass a number)")
         p = self.path / JOB_JSON
+        if p.is_file() and self._repair_job_json(cfg):
+            return True
         if p.is_file():
-            old = json.loads(p.read_text())
+            old = self.read_job()
             if old.get("config_hash") != cfg.hash() and self._rehash(old) == cfg.hash():
                 # made by an older version with the same resolved settings: same rows, record the new hash
                 old["config_hash"] = cfg.hash()
@@ -364,14 +423,57 @@ class JobDir:
                                f"{str(old.get('config_hash'))[:12]} != {cfg.hash()[:12]}; fields differing: {diff}); "
                                "re-run with the same settings to resume, or use another --out")
             return True
-        for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
-            (self.path / d).mkdir(parents=True, exist_ok=True)
-        doc = {"config": cfg.to_dict(), "recipes": [r.to_dict() for r in cfg.recipes()],
-               "config_hash": cfg.hash(), "code_version": code_version(),
-               "packages": package_versions(), "host": socket.gethostname(),
-               "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        atomic_write_text(p, json.dumps(doc, indent=1, sort_keys=True))
+        with writing(self.path / JOB_JSON):
+            for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
+                (self.path / d).mkdir(parents=True, exist_ok=True)
+            self._write_job_json(cfg, time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
         return False
+
+    def _write_job_json(self, cfg: JobConfig, created_at: str) -> None:
+        recipes = cfg.recipes()
+        doc = {"config": cfg.to_dict(), "recipes": [r.to_dict() for r in recipes],
+               "config_hash": cfg.hash(), "code_version": code_version(),
+               # the hand gains the verdicts follow, as resolved now (datagen/eval/protocol.py)
+               "eval_protocol": recipes[0].eval.protocol,
+               "packages": package_versions(), "host": socket.gethostname(), "created_at": created_at}
+        with writing(self.path / JOB_JSON):
+            atomic_write_text(self.path / JOB_JSON, json.dumps(doc, indent=1, sort_keys=True))
+
+    def recorded_hashes(self) -> dict[str, str]:
+        """Config hashes the job's finished work records -> its creation time: the ledger entries'
+        ``config_hash`` and the shards' ``datagen.config_hash`` metadata (what job.json can be
+        checked, or rebuilt, against)."""
+        out: dict[str, str] = {}
+        for p in sorted((self.path / LEDGER_DIR).glob("part-*.json")):
+            try:
+                h = integrity.read_ledger(p).get("config_hash")
+            except integrity.ShardError:
+                continue
+            if isinstance(h, str):
+                out.setdefault(h, "")
+        for p in sorted((self.path / SHARDS_DIR).glob("part-*.parquet")):
+            try:
+                meta = pq_schema_metadata(p)
+            except Exception:  # noqa: BLE001 - a damaged shard records nothing
+                continue
+            h = meta.get(b"datagen.config_hash", b"").decode()
+            if h:
+                out[h] = out.get(h) or meta.get(b"datagen.job_created_at", b"").decode()
+        return out
+
+    def _repair_job_json(self, cfg: JobConfig) -> bool:
+        """When job.json cannot be read, write it again from ``cfg`` if the job's finished work
+        records ``cfg``'s hash and no other (True); otherwise `read_job`'s error. A readable
+        job.json: False (nothing to repair)."""
+        try:
+            self.read_job()
+            return False
+        except JobError as exc:
+            recorded = self.recorded_hashes()
+            if set(recorded) != {cfg.hash()}:
+                raise exc from None
+        self._write_job_json(cfg, recorded[cfg.hash()] or time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+        return True
 
     @staticmethod
     def _rehash(doc: dict) -> str:
@@ -382,15 +484,40 @@ class JobDir:
 
     # ------------------------------------------------------------- shards
     def finished(self) -> dict[int, dict]:
-        """Ledger entries of finished shards, by shard index."""
-        out = {}
-        for p in sorted((self.path / LEDGER_DIR).glob("part-*.json")):
-            out[int(p.stem.split("-")[1])] = json.loads(p.read_text())
-        return out
+        """Ledger entries of finished shards whose files match them (sizes and row counts:
+        `audit`), by shard index."""
+        return self.audit().finished
+
+    def audit(self, deep: bool = False) -> integrity.Audit:
+        """Every ledger entry checked against the files it lists (`datagen.io.integrity.audit`;
+        ``deep``: their sha256 too)."""
+        return integrity.audit(self.path, deep=deep)
 
     def record_finished(self, index: int, summary: dict) -> None:
-        self.ledger_path(index).parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
+        with writing(self.ledger_path(index), "the ledger entry"):
+            self.ledger_path(index).parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(self.ledger_path(index), json.dumps(summary, indent=1, sort_keys=True))
+
+    def clean_temp(self) -> list[Path]:
+        """Remove the temporary files and folders a killed or failed run left (``.<name>.*.tmp``
+        in the job's folders, objects being linked in); returns them. Only under the lock: no
+        other run of this job writes them now."""
+        gone = []
+        for d in (self.path, self.path / SHARDS_DIR, self.path / FAILURES_DIR, self.path / LEDGER_DIR,
+                  self.path / PROGRESS_DIR, self.objects_dir):
+            for p in d.glob(".*.tmp") if d.is_dir() else ():
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
+                gone.append(p)
+        return gone
+
+
+def pq_schema_metadata(path: Path) -> dict:
+    import pyarrow.parquet as pq
+
+    return pq.read_schema(path).metadata or {}
 
 
 def shard_size(n_objects: int, workers: int, gpu: bool = False) -> int:

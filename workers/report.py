@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
 from datagen._atomic import atomic_write_text
+from datagen.io import integrity
 from schemas import column_table
 
-from .job import JobDir
+from .job import JobDir, JobError, JobIOError, writing
 from .status import job_status
 
 __all__ = ["pick_renders", "write_report"]
@@ -65,10 +65,14 @@ def _table(header: list[str], rows: list[list]) -> list[str]:
 
 
 def _read_rows(job: JobDir) -> pa.Table | None:
-    paths = [job.shard_path(i) for i in sorted(job.finished()) if job.shard_path(i).is_file()]
-    tables = [pq.read_table(p) for p in paths]
-    tables = [t for t in tables if t.num_rows]
-    return pa.concat_tables(tables) if tables else None
+    """Every row of the finished shards (`datagen.io.read_job`: each checked against the ledger,
+    page checksums verified), None before the first row."""
+    from datagen.io import read_job
+
+    try:
+        return read_job(job.path)
+    except FileNotFoundError:  # no finished shard with rows yet
+        return None
 
 
 def pick_renders(success: list[bool], objects: list[str], n: int) -> list[int]:
@@ -180,13 +184,39 @@ def _evaluation_line(overrides: dict, job_code: str) -> str:
             + ("" if code == job_code else f" (settings as code `{code}` resolves the job's `eval` overrides)"))
 
 
+def _protocol_line(doc: dict, hand: str) -> str:
+    """Whose hand gains the verdicts follow: job.json's ``eval_protocol`` (jobs before it: the
+    gains every hand had then, kp 5 and +-3)."""
+    from datagen.eval.protocol import PEER_GAINS
+
+    p = doc.get("eval_protocol")
+    if p is None:
+        return ("- hand gains: every hand at kp 5, force +-3 (a job made before `eval_protocol` was recorded; "
+                "`protocol: uniform` now)")
+    if p == "dexgraspbench" and hand in PEER_GAINS:
+        g = PEER_GAINS[hand]
+        limit = "no force limit" if g.force_limit is None else f"force +-{g.force_limit:g}"
+        return (f"- hand gains: protocol `dexgraspbench`, DexGraspBench's {hand} file (kp {g.kp:g}, kv {g.kv:g}, "
+                f"{limit}; {g.source}); verdicts against its evaluator: benchmarks/results/interop.md")
+    return f"- hand gains: protocol `{p}` (datagen/eval/protocol.py)"
+
+
 def write_report(path: str | Path, renders: int = 6) -> Path:
     """Write JOB/README.md; ``renders`` grasps are drawn (half successes, half failures)."""
     job = JobDir(path)
     doc = job.read_job()
+    out = job.path / "README.md"
+    if not os.access(job.path, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise JobIOError(f"cannot write the dataset card {out}: the job directory is not writable",
+                         "run `datagen report` on a writable copy of the job (cp -r), or as its owner")
     s = job_status(job.path)
+    if s["damaged"]:
+        i, why = next(iter(s["damaged"].items()))
+        raise JobError(f"job {job.path}: shard {i} does not match its ledger entry ({why}); the card would "
+                       "miss its rows", integrity.redo_remedy(job.path))
     rows = _read_rows(job)
-    fails = pq.read_table(job.failures_path) if job.failures_path.is_file() else None
+    fails = (integrity.read_parquet(job.failures_path, remedy=integrity.redo_remedy(job.path))
+             if job.failures_path.is_file() else None)
     cfg = doc["config"]
     md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}")),
           f"# Dataset card: {job.path.name}", "",
@@ -198,7 +228,7 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
           f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
           f"`object_path` points into `objects/` (relative to this directory)",
           f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()),
-          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), "",
+          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), _protocol_line(doc, cfg["hand"]), "",
           "## Outcome", ""]
     md += _table(["grasps", "successful", "success rate", "objects failed"],
                  [[s["grasps"], s["success"], f"{s['success_rate']:.1%}", fails.num_rows if fails is not None else 0]])
@@ -258,6 +288,6 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
     else:
         md += [note, ""]
     md += ["## Config", "", "```json", json.dumps(cfg, indent=1, sort_keys=True), "```", ""]
-    out = job.path / "README.md"
-    atomic_write_text(out, "\n".join(md))
+    with writing(out, "the dataset card"):
+        atomic_write_text(out, "\n".join(md))
     return out

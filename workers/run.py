@@ -1,197 +1,33 @@
-"""The Ray driver of a dataset job: manifest -> shards -> Ray tasks (`shard.run_shard`) -> ledger.
+"""The driver of a dataset job: job directory -> shards -> Ray tasks (`shard.run_shard`) -> ledger.
 
-Without an address (argument or ``RAY_ADDRESS``) it starts a local Ray with every core, no
-dashboard, every port on the loopback interface and its temp dir inside the job directory
-(`start_local_ray`). Ray puts Unix sockets under
-``<temp>/session_<date>_<pid>/sockets/``, and a socket path may not exceed 107 bytes, so when
-``<job>/ray`` is longer than `MAX_RAY_TEMP_LEN` characters a short ``/tmp/dg-ray-XXXX`` is used
-instead (named by a hash of the job path; printed, and removed at the end). With an address it joins that cluster; the
-job directory and the objects cache must then be on a file system every node sees, and every
-node needs this package installed.
+`run_job` checks the output and the cache and makes the job directory ready (`workers.setup`),
+starts or joins the Ray cluster (`workers.cluster`), runs every shard the ledger does not list as
+finished (`workers.finished`), with a progress bar, and merges the failures. Crash-consistent: a
+shard counts only once its ledger entry is written, so a rerun redoes exactly the others.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
-import re
 import shutil
 import sys
 import time
 from pathlib import Path
 
-import pyarrow as pa
-import pyarrow.parquet as pq
-
-from schemas import arrow_schema
-
+from datagen._interrupt import raise_on_sigterm
 from datagen.io.layout import JOB_JSON
 
-from .job import AUTO, JobConfig, JobDir, JobError, code_version, package_versions, shard_size, shard_slices
-from .shard import _failure, run_shard, write_table_atomic
+from .cluster import connect, error_line, start_local_ray, start_reaper_for, stop_local_ray, worker_slots
+from .finished import finished_or_redo, merge_failures, retryable_shards
+from .job import AUTO, JobConfig, JobDir, JobError, JobIOError, code_version, package_versions, shard_size, shard_slices
+from .setup import check_cache, check_out, discard_new_job, pin_job_hand, prepare_manifest
+from .shard import run_shard
 
-__all__ = ["run_job", "prepare_manifest", "pin_job_hand", "merge_failures", "retryable_shards", "error_line", "FINAL_REASONS",
-           "MAX_RAY_TEMP_LEN", "start_local_ray", "stop_local_ray", "worker_slots"]
+__all__ = ["run_job"]
 
-MAX_RAY_TEMP_LEN = 40
-LOOPBACK = "127.0.0.1"  # the local cluster's node address: Ray then listens on loopback only
 TASK_RETRIES = 3  # a shard whose node dies is rerun elsewhere (shards are idempotent)
-
-
-# failure reasons decided by an object's bytes: cached with the object, so a retry cannot change
-# them; every other failure (timeout, crashed, error, missing_file, ...) is retried by
-# `run_job(retry_failed=True)`
-FINAL_REASONS = frozenset({"unreadable_mesh", "empty_mesh", "non_finite_vertices", "huge_coordinates", "too_many_faces",
-                           "degenerate_mesh", "coacd_failed", "coacd_no_parts", "surface_failed", "mjcf_failed"})
-
-
-def prepare_manifest(job: JobDir, cfg: JobConfig) -> list:
-    """The job's manifest slice: read back when present (resume), else built or cut from
-    ``cfg.manifest`` and written atomically. Objects of the source that cannot be manifest
-    entries become rows of ``failures/manifest.parquet`` (stage ``manifest``)."""
-    from datagen.objects.errors import ManifestError
-    from datagen.objects.manifest import build_manifest, load_manifest, write_manifest
-
-    if job.manifest_path.is_file():
-        try:
-            return load_manifest(job.manifest_path, check_paths=False)
-        except ManifestError as exc:
-            raise JobError(f"job {job.path}: its manifest no longer loads ({exc}); start the job in a new "
-                           "--out") from None
-    rejected = []
-    if cfg.manifest:
-        entries = load_manifest(cfg.manifest)[: cfg.count]
-        if len(entries) < cfg.count:
-            print(f"warning: manifest {cfg.manifest} has {len(entries)} objects, fewer than count {cfg.count}",
-                  file=sys.stderr)
-    else:
-        entries = build_manifest(cfg.source, cfg.count, cfg.scales, cfg.test_fraction, rejected=rejected)
-    rows: list[dict] = []
-    for r in rejected:  # shard -1: before any shard
-        _failure(rows, -1, r.id, "manifest", r.reason, r.message)
-    write_table_atomic(pa.Table.from_pylist(rows, schema=arrow_schema("failures")), job.manifest_failures_path)
-    if not entries:
-        raise JobError(f"job {job.path}: the manifest is empty (source {cfg.source!r}, manifest {cfg.manifest!r})"
-                       + "".join(f"\n  {r.message}" for r in rejected[:5]))
-    write_manifest(entries, job.manifest_path)
-    return entries
-
-
-def pin_job_hand(job: JobDir, spec) -> Path:
-    """Keep the job's hand in the job directory (``hands/<name>.yaml``, `datagen.hands.pin`): its
-    shards load it from there and so does every reader of its rows, wherever the job is moved. A
-    resumed job whose hand spec or asset files changed since it was created is refused (JobError
-    naming the file): its rows would mix two hands."""
-    from datagen.hands import HandSpecError, pin_hand
-
-    try:
-        return pin_hand(spec, job.path)
-    except HandSpecError as exc:
-        raise JobError(f"job {job.path}: {exc}") from None
-
-
-def merge_failures(job: JobDir) -> pa.Table:
-    """Concatenate the manifest's and the shards' failure files into ``failures.parquet``
-    (atomically)."""
-    schema = arrow_schema("failures")
-    files = ([job.manifest_failures_path] if job.manifest_failures_path.is_file() else [])
-    files += sorted((job.path / "failures").glob("part-*.parquet"))
-    parts = [pq.read_table(p) for p in files]
-    table = pa.concat_tables([p.cast(schema) for p in parts]) if parts else schema.empty_table()
-    write_table_atomic(table, job.failures_path)
-    return table
-
-
-def retryable_shards(job: JobDir, done: dict) -> list[int]:
-    """Finished shards with a failure a rerun may fix (any reason outside `FINAL_REASONS`)."""
-    out = []
-    for i in sorted(done):
-        fp = job.shard_failures_path(i)
-        if fp.is_file() and any(r not in FINAL_REASONS for r in pq.read_table(fp, columns=["reason"])["reason"]
-                                .to_pylist()):
-            out.append(i)
-    return out
-
-
-def error_line(exc: BaseException) -> str:
-    """One line naming an exception from a Ray task: its cause, without traceback or colours."""
-    cause = getattr(exc, "cause", None)
-    if isinstance(cause, BaseException):
-        exc = cause
-    text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc))
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return f"{type(exc).__name__}: {lines[-1] if lines else ''}"
-
-
-def _ray_temp_dir(job: JobDir) -> tuple[str, bool]:
-    """(temp dir, is_private_tmp)."""
-    inside = job.path / "ray"
-    if len(str(inside)) <= MAX_RAY_TEMP_LEN:
-        inside.mkdir(mode=0o700, parents=True, exist_ok=True)
-        os.chmod(inside, 0o700)
-        return str(inside), False
-    # a name fixed by the job path: a resumed run reuses (and finally removes) a killed run's dir
-    short = Path("/tmp") / f"dg-ray-{hashlib.sha256(str(job.path).encode()).hexdigest()[:10]}"
-    short.mkdir(mode=0o700, exist_ok=True)
-    if short.owner() != __import__("getpass").getuser():
-        raise JobError(f"{short} (Ray's temp dir for this job) belongs to another user; remove it")
-    os.chmod(short, 0o700)
-    return str(short), True
-
-
-def start_local_ray(ray, job: JobDir, num_cpus: int | None, log=print) -> str | None:
-    """Start the job's local Ray: every core (or ``num_cpus``), no dashboard, its temp dir private
-    (`_ray_temp_dir`), every port on the loopback interface. Returns the temp dir to remove at the
-    end (a ``/tmp/dg-ray-*`` one), else None.
-
-    Ray binds its gRPC servers (GCS, raylet, object manager, each worker's), its agents and the
-    metrics exporter to the loopback interface when the node's address is loopback, but on Linux
-    it replaces a loopback ``_node_ip_address`` by the machine's address unless its single-machine
-    mode is on (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, the default on macOS and Windows; read
-    when ``ray`` is imported, so it is set here on Ray's constant for the duration of ``init``).
-    """
-    tmp, private = _ray_temp_dir(job)
-    if private:
-        log(f"ray temp dir {tmp} (the job path is too long for Ray's Unix sockets)")
-    constants = getattr(getattr(ray, "_private", None), "ray_constants", None)
-    single = getattr(constants, "ENABLE_RAY_CLUSTER", None)
-    if single is not None:
-        constants.ENABLE_RAY_CLUSTER = False
-    try:
-        ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, _temp_dir=tmp,
-                 _node_ip_address=LOOPBACK, log_to_driver=False, configure_logging=False)
-    finally:
-        if single is not None:
-            constants.ENABLE_RAY_CLUSTER = single
-    os.chmod(tmp, 0o700)  # Ray makes it world-writable; its sockets and logs are ours only
-    node_ip = ray.util.get_node_ip_address()
-    if node_ip not in (LOOPBACK, "::1"):
-        log(f"warning: Ray {ray.__version__} put the local cluster on {node_ip}, not on the loopback interface: "
-            "its ports listen on every interface; on a shared network, firewall them")
-    return tmp if private else None
-
-
-def stop_local_ray(ray) -> None:
-    """``ray.shutdown()`` of a local cluster this process started, 1 s sooner.
-
-    Ray's shutdown stops its processes one after another, each with SIGTERM and up to 1 s to
-    exit. The autoscaler monitor ignores SIGTERM, so every job waited the full second for it (Ray
-    2.60: 1.37 -> 0.33 s per shutdown on the project's machine). A local cluster has one node and
-    never scales: the monitor is killed first, then Ray stops the rest as usual. The monitor is
-    looked up through Ray's private node object; where there is none (a driver connected to a
-    cluster owns no Ray process, or another Ray version), this is plain ``ray.shutdown()``."""
-    node = getattr(getattr(getattr(ray, "_private", None), "worker", None), "_global_node", None)
-    for info in (getattr(node, "all_processes", None) or {}).get("monitor", []):
-        proc = getattr(info, "process", None)
-        try:
-            if proc is not None and proc.poll() is None:
-                proc.kill()
-                proc.wait(timeout=5)
-        except Exception:  # noqa: BLE001 - ray.shutdown below stops it the slow way
-            pass
-    ray.shutdown()
 
 
 def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_cpus: int | None = None,
@@ -205,10 +41,12 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
 
     from .status import job_status
 
+    if num_cpus is not None and (isinstance(num_cpus, bool) or not isinstance(num_cpus, int) or num_cpus < 1):
+        raise JobError(f"--num-cpus must be an integer >= 1 (CPUs of the local Ray cluster), got {num_cpus!r}")
     hand = cfg.check_runnable()
     job = JobDir(out)
-    _check_out(job.path)
-    _check_cache(cache)
+    check_out(job.path)
+    check_cache(cache)
     existed = job.path.exists()
     try:
         job.lock()
@@ -216,6 +54,8 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         raise JobError(f"--out {job.path}: cannot create the job directory: {exc.strerror}") from None
     connected = False
     try:
+        for p in job.clean_temp():
+            log(f"removed {p.relative_to(job.path)}, left by an interrupted run")
         cfg, connected = _resolve_layout(cfg, job, address, num_cpus)
         resumed = job.init(cfg)
         doc = job.read_job()
@@ -224,10 +64,10 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
             entries = prepare_manifest(job, cfg)
         except Exception:
             if not resumed:  # leave no half job behind to refuse the corrected command
-                _discard_new_job(job, remove_dir=not existed)
+                discard_new_job(job, remove_dir=not existed)
             raise
         slices = shard_slices(len(entries), cfg.objects_per_shard)
-        done = job.finished()
+        done = finished_or_redo(job, log)
         retry = retryable_shards(job, done) if retry_failed else []
         for i in retry:  # unfinished until rerun: readers never see old and new files mixed
             job.ledger_path(i).unlink(missing_ok=True)
@@ -255,35 +95,6 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         job.unlock()
 
 
-def worker_slots(cfg: JobConfig, address: str | None, num_cpus: int | None) -> tuple[int, bool, bool]:
-    """(shard tasks that can run at once, whether this connected to a Ray cluster to count them,
-    whether the shards get GPUs).
-
-    Local: ``num_cpus`` (or every core) over ``cpus_per_shard``, and this machine's CUDA devices
-    over ``gpus_per_shard`` when it has any. A cluster (``address`` or $RAY_ADDRESS, not "local"):
-    its CPUs over ``cpus_per_shard``, and its GPUs over ``gpus_per_shard`` when it has GPUs, as Ray
-    reports them now. The scarcer resource sets the count: a shard task asks for both."""
-    import ray
-
-    address = address or os.environ.get("RAY_ADDRESS") or None
-    connected = False
-    if address and address != "local":
-        if not ray.is_initialized():
-            ray.init(address=address, log_to_driver=False)
-            connected = True
-        res = ray.cluster_resources()
-        cpus, gpus = res.get("CPU", 1.0), res.get("GPU", 0)
-    else:
-        import torch
-
-        cpus, gpus = num_cpus or os.cpu_count() or 1, torch.cuda.device_count() if torch.cuda.is_available() else 0
-    slots = cpus / cfg.cpus_per_shard
-    on_gpus = gpus > 0 and cfg.gpus_per_shard > 0
-    if on_gpus:
-        slots = min(slots, gpus / cfg.gpus_per_shard)
-    return max(1, int(slots + 1e-9)), connected, on_gpus
-
-
 def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: int | None) -> tuple[JobConfig, bool]:
     """``cfg`` with ``objects_per_shard: auto`` replaced by a number: the one job.json recorded
     when the job was created (a resumed job keeps its shards whatever runs it now), else
@@ -292,60 +103,16 @@ def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: 
     if cfg.objects_per_shard != AUTO:
         return cfg, False
     if (job.path / JOB_JSON).is_file():
-        stored = job.read_job().get("config", {}).get("objects_per_shard")
+        try:
+            stored = job.read_job().get("config", {}).get("objects_per_shard")
+        except JobError:  # unreadable: the ledger records it too (`JobDir.init` may then rewrite job.json)
+            stored = next((e.get("objects_per_shard") for e in job.audit().finished.values()), None)
         if isinstance(stored, int) and not isinstance(stored, bool) and stored >= 1:
             return dataclasses.replace(cfg, objects_per_shard=stored), False
         # no number recorded (not a job of this code): resolve as for a new job; JobDir.init then
         # names whatever differs
     slots, connected, on_gpus = worker_slots(cfg, address, num_cpus)
     return dataclasses.replace(cfg, objects_per_shard=shard_size(cfg.count, slots, gpu=on_gpus)), connected
-
-
-def _discard_new_job(job: JobDir, remove_dir: bool) -> None:
-    """Remove what `JobDir.init` and `prepare_manifest` wrote for a job that never started."""
-    from datagen.io.layout import FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, OBJECTS_DIR, SHARDS_DIR
-
-    from datagen.hands.pin import HANDS_DIR
-
-    for f in (job.path / JOB_JSON, job.manifest_failures_path, job.manifest_path):
-        f.unlink(missing_ok=True)
-    shutil.rmtree(job.path / HANDS_DIR, ignore_errors=True)  # the hand pin_job_hand kept
-    for d in (SHARDS_DIR, FAILURES_DIR, OBJECTS_DIR, LEDGER_DIR):
-        try:
-            (job.path / d).rmdir()
-        except OSError:
-            pass
-    if remove_dir:
-        (job.path / LOCK).unlink(missing_ok=True)
-        try:
-            job.path.rmdir()
-        except OSError:
-            pass
-
-
-def _check_out(path: Path) -> None:
-    """A usable job directory: not a file, and writable (JobError naming the problem)."""
-    if path.exists() and not path.is_dir():
-        raise JobError(f"--out {path} is an existing file, not a job directory; choose another --out")
-    probe = path
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
-        raise JobError(f"--out {path}: cannot write in {probe} (permission denied); choose another --out")
-
-
-def _check_cache(cache: str | None) -> None:
-    """The objects cache root exists or can be made, and is writable (JobError otherwise)."""
-    from datagen.objects.cache import cache_root
-
-    root = cache_root(cache or os.environ.get("DATAGEN_CACHE") or None)
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise JobError(f"objects cache {root}: cannot create it ({exc.strerror}); set --cache or "
-                       "$DATAGEN_CACHE to a writable folder") from None
-    if not os.access(root, os.W_OK | os.X_OK):
-        raise JobError(f"objects cache {root} is not writable; set --cache or $DATAGEN_CACHE to a writable folder")
 
 
 def _progress_units(job: JobDir, slices, running) -> float:
@@ -366,12 +133,15 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
     started = False
     for i in todo:  # a killed run's progress is stale
         job.progress_path(i).unlink(missing_ok=True)
+    reaper = None
     if not ray.is_initialized():
         if address and address != "local":  # "local": Ray's name for a new local cluster
-            ray.init(address=address, log_to_driver=False)
+            connect(ray, address)
         else:
             private_tmp = start_local_ray(ray, job, num_cpus, log)
+            reaper = start_reaper_for(ray)
         started = True
+    raise_on_sigterm()  # again: Ray's core worker replaced the handler with one that dumps native stacks
     try:
         gpus = cfg.gpus_per_shard if ray.cluster_resources().get("GPU", 0) > 0 else 0
         task = ray.remote(run_shard).options(num_cpus=cfg.cpus_per_shard, num_gpus=gpus, max_retries=TASK_RETRIES,
@@ -401,6 +171,13 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
                     s = ray.get(ref)
                     grasps, ok = grasps + s["grasps"], ok + s["success"]
                 except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
+                    cause = getattr(exc, "cause", None)
+                    if isinstance(cause, JobIOError):  # a full disk: every other shard would fail the same way
+                        for r in pending:
+                            ray.cancel(r, force=True)
+                        if bar is not None:
+                            bar.close()
+                        raise cause from None
                     errors[i] = error_line(exc)
                     log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
                 finished_objects += slices[i][1] - slices[i][0]
@@ -416,5 +193,9 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
     finally:
         if started:
             stop_local_ray(ray)  # a driver connected to a cluster owns no Ray process: plain ray.shutdown()
+        if reaper is not None:
+            reaper.close()
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)
+
+

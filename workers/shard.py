@@ -26,10 +26,11 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from datagen._atomic import atomic_path, atomic_write_text
+from datagen.io import integrity
 from datagen.pipeline import failure
 from schemas import arrow_schema
 
-from .job import JobConfig, JobDir
+from .job import JobConfig, JobDir, JobIOError, _errno_of, writing
 
 __all__ = ["run_shard", "write_table_atomic", "shard_seed"]
 
@@ -43,7 +44,8 @@ def shard_seed(cfg: JobConfig, index: int) -> int:
 
 def _link_into_job(processed, job: JobDir) -> str:
     """Hard-link (or copy) a processed-object directory into the job; returns its path
-    relative to the job directory."""
+    relative to the job directory. A copy that fails (a full disk) leaves no temp dir behind
+    (`JobDir.clean_temp` removes those of a killed process on the next run)."""
     rel = Path("objects") / processed.entry.name
     dst = job.path / rel
     if not (dst / "meta.json").is_file():
@@ -56,7 +58,16 @@ def _link_into_job(processed, job: JobDir) -> str:
             except OSError:
                 shutil.copy2(src, d)
 
-        shutil.copytree(processed.entry, tmp, copy_function=link)
+        with writing(tmp, "the processed object's copy"):
+            try:
+                shutil.copytree(processed.entry, tmp, copy_function=link)
+            except shutil.Error as exc:  # copytree gathers the errors of its files: the first one
+                shutil.rmtree(tmp, ignore_errors=True)
+                first = exc.args[0][0] if exc.args and exc.args[0] else ("", "", str(exc))
+                raise OSError(_errno_of(first[2]), str(first[2]), first[1]) from None
+            except BaseException:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise
         try:
             os.replace(tmp, dst)
         except OSError:  # another attempt won the race
@@ -64,12 +75,16 @@ def _link_into_job(processed, job: JobDir) -> str:
     return str(rel)
 
 
-def write_table_atomic(table: pa.Table, path: Path) -> None:
-    """Write Parquet atomically (`datagen._atomic`): the final name holds either nothing or a
-    complete file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
+def write_table_atomic(table: pa.Table, path: Path) -> dict:
+    """Write Parquet atomically (`datagen._atomic`) with page checksums: the final name holds
+    either nothing or a complete file. Returns its ledger record (`integrity.file_record`).
+    A write that fails (a full disk) is a `JobIOError` naming the path; no temp file is left."""
+    with writing(path, "the Parquet file"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp, **integrity.WRITE_OPTIONS)
+            record = integrity.file_record(tmp)
+    return record
 
 
 def _failure(fails: list, shard: int, object_id: str, stage: str, reason: str, message: str,
@@ -113,6 +128,16 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             os.environ.pop("DATAGEN_CACHE", None)
         else:
             os.environ["DATAGEN_CACHE"] = before
+
+
+def _node_id() -> str:
+    """The Ray node this shard runs on ("" outside Ray): `datagen status` shows where shards ran."""
+    try:
+        import ray
+
+        return ray.get_runtime_context().get_node_id() if ray.is_initialized() else ""
+    except Exception:  # noqa: BLE001 - provenance only
+        return ""
 
 
 def _idle_cores():
@@ -164,7 +189,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
     n_targets = sum(len(d["scales"]) for d in entries)
-    progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets)
+    progress = ShardProgress(job.progress_path(index), total=2 * len(entries) + 2 * len(cfg.tasks) * n_targets,
+                             node=_node_id())
     timings = {"process_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
     fails: list[dict] = []
 
@@ -187,6 +213,8 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
                                      object_path=rel, mesh_sha256=e.sha256, split=e.split))
         except ObjectError as exc:  # e.g. scale "native" on a mesh that is not in metres
             _failure(fails, index, e.id, "process", exc.reason.value, str(exc))
+        except JobIOError:  # the job directory cannot be written (a full disk): the shard stops
+            raise
         except Exception as exc:  # noqa: BLE001 - recorded, never fatal
             _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
         finally:
@@ -224,11 +252,13 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         "datagen.eval_config": recipes[0].eval.to_dict(),
         "datagen.process_config": pcfg.to_dict()}.items()})
     out = batch.rows.replace_schema_metadata(meta)
+    files = {}  # the ledger's record of each file (size, rows, sha256): readers check them
     if out.num_rows:
-        write_table_atomic(out, job.shard_path(index))
+        files[integrity.shard_file(index)] = write_table_atomic(out, job.shard_path(index))
     else:  # no rows: no shard file (some readers, e.g. Hugging Face datasets, reject empty Parquet files)
         job.shard_path(index).unlink(missing_ok=True)
-    write_table_atomic(pa.Table.from_pylist(fails, schema=arrow_schema("failures")), job.shard_failures_path(index))
+    files[integrity.failures_file(index)] = write_table_atomic(
+        pa.Table.from_pylist(fails, schema=arrow_schema("failures")), job.shard_failures_path(index))
     timings["write_s"] = time.perf_counter() - t0
     n_ok = int(pc.sum(out["success"]).as_py() or 0) if out.num_rows else 0
     summary = {"shard": index, "objects": len(entries), "objects_ok": len(ready), "grasps": out.num_rows,
@@ -236,21 +266,23 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
                "timings": {k: round(v, 3) for k, v in timings.items()},
                "wall_s": round(time.perf_counter() - t_start, 3),
                "started_unix_s": round(started, 3), "finished_unix_s": round(time.time(), 3),
-               "cpu_s": round(time.process_time() - cpu_start, 3)}  # this process (not the CoACD children)
+               "cpu_s": round(time.process_time() - cpu_start, 3),  # this process (not the CoACD children)
+               "node": _node_id(), "seed": shard_seed(cfg, index), "config_hash": cfg.hash(),
+               "objects_per_shard": cfg.objects_per_shard, "files": files}
     job.record_finished(index, summary)
     progress.set(progress.total)
     return summary
 
 
 class ShardProgress:
-    """A running shard's progress, ``{"done": units, "total": units}`` in a small JSON file the
+    """A running shard's progress, ``{"done": units, "total": units, "node": Ray node id}`` in a small JSON file the
     driver polls (written atomically, at most every 0.5 s). Units: one per object processed and
     one per object whose target is built; then per task, as many for the synthesis of the batch
     (moving with its iterations) and as many again for its evaluation as the shard has objects x
     scales. A rough but steady measure of work: synthesis and evaluation dominate a shard."""
 
-    def __init__(self, path: Path, total: float):
-        self.path, self.total, self.done, self._last = path, float(total), 0.0, 0.0
+    def __init__(self, path: Path, total: float, node: str = ""):
+        self.path, self.total, self.done, self._last, self.node = path, float(total), 0.0, 0.0, node
         self._write(force=True)
 
     def add(self, n: float) -> None:
@@ -268,6 +300,7 @@ class ShardProgress:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             # polled, rewritten every 0.5 s: atomic but not flushed to disk
-            atomic_write_text(self.path, json.dumps({"done": round(self.done, 3), "total": self.total}), fsync=False)
+            state = {"done": round(self.done, 3), "total": self.total, "node": self.node}
+            atomic_write_text(self.path, json.dumps(state), fsync=False)
         except OSError:  # progress is a convenience: never fail a shard for it
             pass

@@ -7,8 +7,6 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-import pyarrow.parquet as pq
-
 from .job import JobDir, shard_slices
 
 __all__ = ["STAGES", "job_status", "format_status"]
@@ -25,42 +23,54 @@ STAGES = {
 
 
 def job_status(path: str | Path) -> dict:
-    """Counts read from the job's ledger, shards and failure files (no Ray, no lock)."""
+    """Counts read from the job's ledger, shards and failure files (no Ray, no lock). Every
+    finished shard's files are checked against its ledger entry (size and footer row count,
+    `JobDir.audit`): one that does not match is not counted and is listed in ``damaged``
+    (index -> the file and what is wrong); a rerun of the job redoes it."""
+    from datagen.io.integrity import ShardError, read_parquet
     from datagen.objects.manifest import load_manifest
 
     job = JobDir(path)
     cfg = job.config()
     n_objects = len(load_manifest(job.manifest_path, check_paths=False)) if job.manifest_path.is_file() else cfg.count
     total = len(shard_slices(n_objects, cfg.objects_per_shard))
-    done = job.finished()
+    found = job.audit()
+    done, damaged = dict(found.finished), dict(found.problems)
     grasps = success = 0
     reasons: Counter = Counter()
     failures: Counter = Counter()
     stage_s: Counter = Counter()
     if job.manifest_failures_path.is_file():
-        f = pq.read_table(job.manifest_failures_path, columns=["stage", "reason"])
+        f = read_parquet(job.manifest_failures_path, ["stage", "reason"])
         failures.update(f"{s}:{r}" for s, r in zip(f["stage"].to_pylist(), f["reason"].to_pylist()))
-    from .run import retryable_shards
+    from .finished import retryable_shards
 
-    retryable = len(retryable_shards(job, done))
-    for i, entry in done.items():
-        p = job.shard_path(i)
-        if p.is_file():
-            t = pq.read_table(p, columns=["reason", "success"])
+    for i, entry in sorted(done.items()):
+        p, fp = job.shard_path(i), job.shard_failures_path(i)
+        try:
+            t = read_parquet(p, ["reason", "success"]) if i in found.shard_files(job.path) else None
+            f = read_parquet(fp, ["stage", "reason"]) if fp.is_file() else None
+        except ShardError as exc:
+            damaged[i] = f"{Path(exc.path).relative_to(job.path)}: {exc.reason}"
+            continue
+        if t is not None:
             grasps += t.num_rows
             success += sum(1 for x in t["success"].to_pylist() if x)
             reasons.update(t["reason"].to_pylist())
-        fp = job.shard_failures_path(i)
-        if fp.is_file():
-            f = pq.read_table(fp, columns=["stage", "reason"])
+        if f is not None:
             failures.update(f"{s}:{r}" for s, r in zip(f["stage"].to_pylist(), f["reason"].to_pylist()))
         stage_s.update(entry.get("timings", {}))
         stage_s.update({"shard_wall_s": entry.get("wall_s", 0.0), "shard_cpu_s": entry.get("cpu_s", 0.0)})
+    for i in damaged:
+        done.pop(i, None)
+    retryable = len(retryable_shards(job, done))
     return {"job": str(job.path), "config_hash": job.read_job()["config_hash"], "objects": n_objects,
             "shards_total": total, "shards_done": len(done), "grasps": grasps, "success": success,
             "success_rate": success / grasps if grasps else 0.0, "eval_reasons": dict(reasons.most_common()),
             "failures": dict(failures.most_common()), "stage_seconds": {k: round(v, 2) for k, v in stage_s.items()},
-            "retryable": retryable, "complete": len(done) == total}
+            "retryable": retryable, "damaged": {int(k): v for k, v in sorted(damaged.items())},
+            "nodes": len({e.get("node") for e in done.values() if e.get("node")}),
+            "complete": len(done) == total}
 
 
 def format_status(s: dict) -> str:
@@ -72,6 +82,11 @@ def format_status(s: dict) -> str:
     if s["eval_reasons"]:
         lines.append("  grasp outcomes: " + ", ".join(f"{k} {v}" for k, v in s["eval_reasons"].items()))
     lines.append("  failures: " + (", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "none"))
+    for i, why in s.get("damaged", {}).items():
+        lines.append(f"  shard {i} is not counted: {why}")
+    if s.get("damaged"):
+        lines.append(f"  rerun the job to redo {len(s['damaged'])} damaged shard(s) (same seeds, same rows): "
+                     f"datagen run --resume --out {s['job']}")
     if s.get("retryable"):
         lines.append(f"  {s['retryable']} shard(s) have failures a rerun may fix: rerun with --retry-failed")
     if s["stage_seconds"]:

@@ -3,8 +3,9 @@
 Both take a grasp table: a Parquet file (``datagen synth`` output, a job's shard, an imported
 file) or a job directory (its finished shards). Relative ``object_path`` values are resolved
 against the job directory for a job's shards, else against the table's directory
-(`datagen.eval.table.table_base`). ``datagen render`` picks the offscreen GL backend
-(`datagen.gl.select_backend`) before mujoco is imported.
+(`datagen.eval.table.table_base`); they must lie inside that directory or the objects cache
+unless ``--allow-outside`` is given (`datagen.eval.table.check_object_paths`). ``datagen
+render`` picks the offscreen GL backend (`datagen.gl.select_backend`) before mujoco is imported.
 """
 
 from __future__ import annotations
@@ -36,7 +37,26 @@ def register_eval(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes evaluating rows in parallel")
     p.add_argument("--threads", type=int, default=None,
                    help="threads per grasp stepping the six directions (default: EvalConfig.threads)")
+    _object_options(p)
     p.set_defaults(func=_eval, interrupted="nothing written to {out}; rerun the same command")
+
+
+def _object_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--cache", default=None,
+                   help="objects cache the rows' object_path may point into (default $DATAGEN_CACHE, else "
+                        "~/.cache/datagen)")
+    p.add_argument("--allow-outside", action="store_true",
+                   help="read objects wherever the rows' object_path points; by default only inside the job "
+                        "(or table) directory and the objects cache")
+
+
+def _check_objects(args, table, base) -> None:
+    from datagen.objects.cache import cache_root
+
+    from .table import check_object_paths
+
+    if not args.allow_outside:
+        check_object_paths(table, base, [base, cache_root(args.cache)])
 
 
 def _eval(args) -> int:
@@ -49,6 +69,7 @@ def _eval(args) -> int:
     cfg = _load_config(args.config, args.threads)
     table = read_grasps(args.grasps)
     base = table_base(args.grasps)
+    _check_objects(args, table, base)
     t0 = time.perf_counter()
     out = evaluate_table(table, cfg, base=base, workers=args.workers)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -69,6 +90,7 @@ def register_render(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", default=None, help="EvalConfig YAML (default: the public protocol's constants)")
     p.add_argument("--width", type=int, default=320, help="width of one view, pixels")
     p.add_argument("--height", type=int, default=240, help="height of one view, pixels")
+    _object_options(p)
     p.set_defaults(func=_render, interrupted="the pictures already in {out} are complete; rerun the same command "
                    "for all of them")
 
@@ -87,6 +109,7 @@ def _render(args) -> int:
     cfg = _load_config(args.config, None)
     table = read_grasps(args.grasps)
     base = table_base(args.grasps)
+    _check_objects(args, table, base)
     indices = args.rows if args.rows is not None else list(range(min(4, table.num_rows)))
     hands = {}
     for i in indices:

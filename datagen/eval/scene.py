@@ -6,7 +6,8 @@ is driven by moving the mocap body and by its position actuators (gains set from
 The object is one body of the convex pieces at ``scale`` metres per normalized unit, total
 mass ``EvalConfig.object_mass_kg`` split by piece volume, on a free joint or on the virtual
 hinge/slide joint of a task (with its end stops, if it has any). Every geom gets the config's
-condim, friction and margin; hand geoms get the hand solimp/solref. A task test's scenery (static
+condim, friction and margin; hand geoms get the hand solimp/solref; the hand's position actuators
+get the gains of ``EvalConfig.protocol`` (`datagen.eval.protocol`). A task test's scenery (static
 boxes round a mounted part: door, panel, housing, cabinet) is a static body ``scenery``; its
 contacts with the object are excluded (the part moves inside it), the hand collides with it.
 
@@ -28,6 +29,7 @@ import mujoco
 import numpy as np
 
 from .config import EvalConfig, EvalError, TaskTest
+from .protocol import hand_gains
 
 __all__ = ["ObjectPieces", "Scene", "build_scene", "pieces_from_processed", "HAND_PREFIX"]
 
@@ -199,14 +201,16 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         p.solref = list(cfg.hand_solref)
         p.margin = cfg.geom_margin_m
     for a in spec.actuators:
-        # the config's stiffness, and velocity damping (bias -kv qdot) of at most kp times the
-        # config's time constant: Menagerie's Allegro (kp 24, kv 8) and LEAP (kp 8, kv 5.6) at kp 5
-        # with their own kv would close a finger in 1-1.6 s, after the protocol's 0.4 s phases
-        a.gainprm[0] = cfg.actuator_kp
-        a.biasprm[1] = -cfg.actuator_kp
-        a.biasprm[2] = max(float(a.biasprm[2]), -cfg.actuator_kp * cfg.actuator_time_constant_s)
-        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        a.forcerange = [-cfg.actuator_force_limit, cfg.actuator_force_limit]
+        # the protocol's gains (datagen/eval/protocol.py): DexGraspBench's hand files, or the
+        # config's kp and force limit for every hand with the asset's kv capped at kp times the
+        # config's time constant (a large kv at kp 5 would close a finger after the 0.4 s phases)
+        g = hand_gains(cfg, hand.name, -float(a.biasprm[2]))
+        a.gainprm[0] = g.kp
+        a.biasprm[1] = -g.kp
+        a.biasprm[2] = -g.kv
+        a.forcelimited = mujoco.mjtLimited.mjLIMITED_FALSE if g.force_limit is None else mujoco.mjtLimited.mjLIMITED_TRUE
+        if g.force_limit is not None:
+            a.forcerange = [-g.force_limit, g.force_limit]
 
     body = spec.worldbody.add_body(name="object")
     if task is None or task.joint == "free":

@@ -39,8 +39,8 @@ from .config import EvalConfig, EvalError
 from .evaluate import Evaluator, GraspResult
 from .scene import ObjectPieces, pieces_from_processed
 
-__all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "evaluate_table",
-           "pin_table_hands", "read_grasps", "row_poses", "row_pieces", "table_base"]
+__all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "check_object_paths",
+           "evaluate_table", "pin_table_hands", "read_grasps", "row_poses", "row_pieces", "table_base"]
 
 EVAL_SCHEMA_VERSION = int(declaration("evaluated")["version"])
 INPUT_COLUMNS = ("object_id", "object_scale_m", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
@@ -81,8 +81,11 @@ def read_grasps(path: str | Path) -> pa.Table:
         except FileNotFoundError as exc:
             raise EvalError(str(path), f"not a grasp table: {exc}",
                             "pass a Parquet grasp table or a job directory with finished shards") from None
-    elif path.is_file():
-        table = pq.read_table(path)
+    elif path.is_file():  # a regular file (not a FIFO or a device)
+        try:
+            table = pq.read_table(path)
+        except (OSError, pa.ArrowException) as exc:
+            raise EvalError(str(path), f"not a readable Parquet grasp table ({' '.join(str(exc).split())})") from None
         for old, new in _RENAMED.items():
             if old in table.column_names and new not in table.column_names:
                 table = table.rename_columns([new if c == old else c for c in table.column_names])
@@ -92,6 +95,24 @@ def read_grasps(path: str | Path) -> pa.Table:
     if missing:
         raise EvalError(str(path), f"missing columns {missing}", f"a grasp table needs {list(INPUT_COLUMNS)}")
     return table
+
+
+def check_object_paths(table: pa.Table, base: Path, roots: list[Path]) -> None:
+    """Refuse (`EvalError` naming the row's object, its path and the allowed places) a table row
+    whose ``object_path``, resolved against ``base`` (symbolic links followed), lies outside every
+    folder of ``roots`` (for ``datagen eval``: the job or table directory and the objects cache).
+    A grasp table is data: it must not make the evaluator read files anywhere (``/etc``,
+    ``../..``, another job's objects)."""
+    roots = [Path(r).resolve() for r in roots]
+    ids = table["object_id"].to_pylist()
+    for i, rel in enumerate(table["object_path"].to_pylist()):
+        entry = Path(str(rel))
+        target = (entry if entry.is_absolute() else base / entry).resolve()
+        if not any(target.is_relative_to(r) for r in roots):
+            raise EvalError(f"row {i} (object {ids[i]!r})", f"object_path {rel!r} resolves to {target}, outside "
+                            + " and ".join(str(r) for r in roots),
+                            "pass --allow-outside to read objects from there, or --cache with the objects cache "
+                            "the table was made with")
 
 
 def row_poses(row: dict) -> np.ndarray:

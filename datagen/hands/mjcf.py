@@ -1,7 +1,7 @@
 """The one place where a hand's MJCF/URDF becomes a flat MuJoCo model and a pytorch-kinematics chain.
 
 ``flatten_hand`` reads the source through ``mujoco.MjSpec`` (includes resolved, URDF mesh paths made
-absolute), keeps only the root body's subtree at the world origin, drops free joints and keyframes,
+absolute), undoes a registry copy's edits of a Menagerie hand (`datagen.hands.menagerie`), keeps only the root body's subtree at the world origin, drops free joints and keyframes,
 makes ``meshdir`` absolute, and writes one self-contained XML file that evaluation simulates.
 ``build_chain`` builds the pytorch-kinematics chain from that XML, working around
 pytorch-kinematics 0.10.0's joint-type map being keyed by MuJoCo enums (mujoco >= 3.12 yields
@@ -24,6 +24,7 @@ import torch
 
 from datagen._atomic import atomic_write_text
 
+from .menagerie import undo_registry_edits
 from .spec import AssetRef, Coupling, HandSpecError
 
 log = logging.getLogger(__name__)
@@ -210,6 +211,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
     except Exception as exc:
         raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
                             "check the file and the files it includes") from None
+    undo_registry_edits(spec, source)  # a registry copy of a Menagerie hand -> Menagerie's model
     base = source.parent
     for attr in ("meshdir", "texturedir"):
         value = getattr(spec, attr)

@@ -21,6 +21,7 @@ from typing import Any, ClassVar, Mapping
 import yaml
 
 from datagen._atomic import atomic_write_text
+from datagen._bounded import HAND_SPEC_BYTES, read_text
 from datagen.config import Config
 from datagen.errors import DatagenError
 
@@ -363,7 +364,7 @@ def load_spec(path: str | Path) -> HandSpec:
     if not path.is_file():
         raise HandSpecError(path, "hand spec file not found", "pass a built-in hand name or an existing YAML path")
     try:
-        data = yaml.load(path.read_text(), Loader=_SPEC_LOADER)  # noqa: S506 - a safe loader
+        data = yaml.load(read_text(path, HAND_SPEC_BYTES, "hand spec"), Loader=_SPEC_LOADER)  # noqa: S506 - safe
     except yaml.YAMLError as exc:
         raise HandSpecError(path, f"not valid YAML: {exc}") from None
     return HandSpec.from_dict(data, source_file=path)

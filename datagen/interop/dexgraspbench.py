@@ -6,7 +6,8 @@ under ``graspdata/<object>/scaleNNN_pose000/<i>.npy`` with ``obj_path`` (a peer 
 pose) and ``pregrasp_qpos``, ``grasp_qpos``, ``squeeze_qpos``: 7 root values (the pose of its hand
 XML's world frame) then the joints in its XML's order. `PEER_HANDS` holds, per hand this project
 shares with it, where that XML puts the palm and the joint order (read from its public XMLs:
-``assets/hand/{shadow,allegro,leap}/right_hand.xml``).
+``assets/hand/{shadow,allegro}/right_hand.xml`` and, for LEAP, the MuJoCo Menagerie file its
+``assets/hand/leap/right_hand.xml`` includes).
 
 Export writes our grasps in the object's frame (``obj_pose`` identity) with the object's pieces
 in normalized units (``obj_scale`` = ``object_scale_m``). Import reads such files back into rows
@@ -39,7 +40,9 @@ PEER_HANDS: dict[str, PeerHand] = {
     "shadow_e3m5": PeerHand("shadow", "rh_palm", (0.0, 0.0, 0.034), (1.0, 0.0, 0.0, 0.0), _SHADOW_JOINTS),
     "allegro": PeerHand("allegro", "palm", (0.0, 0.0, 0.0), (0.0, _S, 0.0, _S),
                         tuple(f"{f}j{j}" for f in ("ff", "mf", "rf", "th") for j in range(4))),
-    "leap": PeerHand("leap", "palm", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0),
+    # Menagerie's leap_hand/right_hand.xml (which DexGraspBench includes) puts the palm 0.1 m up its
+    # world z and turned 180 deg about x (the registry copy has it at the origin: datagen.hands.menagerie)
+    "leap": PeerHand("leap", "palm", (0.0, 0.0, 0.1), (0.0, 1.0, 0.0, 0.0),
                      tuple(f"{f}_{j}" for f, js in (("if", ("mcp", "rot", "pip", "dip")),
                                                      ("mf", ("mcp", "rot", "pip", "dip")),
                                                      ("rf", ("mcp", "rot", "pip", "dip")),

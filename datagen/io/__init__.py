@@ -5,8 +5,10 @@
     loader = torch.utils.data.DataLoader(GraspDataset("jobs/default"), batch_size=256)
 """
 
-from . import layout
+from . import integrity, layout
 from .dataset import POSE_COLUMNS, joint_names, open_dataset, read_job, shard_paths
+from .integrity import ShardError
 from .torch_dataset import GraspDataset
 
-__all__ = ["GraspDataset", "POSE_COLUMNS", "joint_names", "layout", "open_dataset", "read_job", "shard_paths"]
+__all__ = ["GraspDataset", "POSE_COLUMNS", "ShardError", "integrity", "joint_names", "layout", "open_dataset",
+           "read_job", "shard_paths"]

@@ -6,7 +6,10 @@
     failures/part-NNNNN.parquet  failed objects of shard N (schema ``failures``)
     failures.parquet             all failures
     objects/<entry>/             processed objects; rows' ``object_path`` is relative to the job dir
-    ledger/part-NNNNN.json       present once shard N is finished (its counts and timings)
+    failures/manifest.parquet    objects of the source that the manifest cannot hold (stage ``manifest``)
+    ledger/part-NNNNN.json       present once shard N is finished (its counts, timings and files)
+    progress/part-NNNNN.json     a running shard's progress (polled by the driver)
+    .lock                        flock held by the running driver
     hands/<name>.yaml            the job's hand, pinned (`datagen.hands.pin.HANDS_DIR`): rows' ``hand``
                                  names it; readers load it from here (``load_hand(name, base=job)``)
 """
@@ -19,4 +22,6 @@ FAILURES = "failures.parquet"
 OBJECTS_DIR = "objects"
 LEDGER_DIR = "ledger"
 LOCK = ".lock"
+PROGRESS_DIR = "progress"
+MANIFEST_FAILURES = "manifest.parquet"
 SHARD_NAME = "part-{index:05d}"

@@ -18,18 +18,28 @@ Public API::
     Reason, ObjectError, MeshProcessingError, ManifestError, SourceError   errors.py
 """
 
-from .config import ProcessConfig
-from .errors import ManifestError, MeshProcessingError, ObjectError, Reason, SourceError
-from .manifest import DEFAULT_SCALES, ManifestEntry, build_manifest, load_manifest, write_manifest
-from .mjcf import object_mjcf
-from .prepare import prepare
-from .process import ProcessedObject, load_processed, process_object
-from .sdf import MeshSDF, SDFResult
-from .sources import ObjectRef, iter_source
+import importlib
 
-__all__ = [
-    "ProcessConfig", "Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError",
-    "DEFAULT_SCALES", "ManifestEntry", "build_manifest", "load_manifest", "write_manifest",
-    "object_mjcf", "prepare", "ProcessedObject", "load_processed", "process_object",
-    "MeshSDF", "SDFResult", "ObjectRef", "iter_source",
-]
+# name -> its module; imported on first use, so a command that only checks its arguments (or a
+# worker that needs one module) does not pay for trimesh, CoACD and torch (~3 s of imports)
+_API = {
+    "ProcessConfig": "config", "Reason": "errors", "ObjectError": "errors", "MeshProcessingError": "errors",
+    "ManifestError": "errors", "SourceError": "errors", "DEFAULT_SCALES": "manifest", "ManifestEntry": "manifest",
+    "build_manifest": "manifest", "load_manifest": "manifest", "write_manifest": "manifest", "object_mjcf": "mjcf",
+    "prepare": "prepare", "ProcessedObject": "process", "load_processed": "process", "process_object": "process",
+    "MeshSDF": "sdf", "SDFResult": "sdf", "ObjectRef": "sources", "iter_source": "sources",
+}
+
+__all__ = list(_API)
+
+
+def __getattr__(name: str):
+    if name in _API:
+        value = getattr(importlib.import_module(f".{_API[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'datagen.objects' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))

@@ -49,6 +49,9 @@ def _manifest_build(args) -> int:
 
 
 def _manifest_check(args) -> int:
+    from .errors import check_manifest_file
+
+    check_manifest_file(args.manifest)  # a device or a FIFO: refused before the imports below
     from .manifest import load_manifest
 
     print(f"{args.manifest}: {len(load_manifest(args.manifest))} objects, valid")

@@ -14,53 +14,21 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
-from datagen.config import Config, check_types
+from datagen.config import Config, check_types, read_yaml
 from datagen.errors import ConfigError
 
-__all__ = ["ProcessConfig", "PROCESS_VERSION", "read_yaml"]
+__all__ = ["MAX_MESH_BYTES", "ProcessConfig", "PROCESS_VERSION", "read_yaml"]
+
+# The default cap on a mesh file's size: the largest mesh `max_faces` lets through in the most
+# verbose format (ASCII STL, ~250 bytes per face: 125 MB), with room to spare. Above it the file
+# is refused unread (reason file_too_large), before any parser holds it in memory.
+MAX_MESH_BYTES = 256 << 20
+# fields that gate which files are read but never change what a processed object holds: outside
+# the cache key (`ProcessConfig.hash`), so raising a cap reuses every cached object
+_UNHASHED = ("max_mesh_bytes",)
 
 # Bump when the pipeline's output changes for the same config: it invalidates cache entries.
 PROCESS_VERSION = 1
-
-
-MAX_YAML_BYTES = 1 << 20  # a config is a few hundred bytes; refuse anything over 1 MiB
-
-
-class _NoAliasLoader(yaml.SafeLoader):
-    """SafeLoader without aliases: ``*ref`` can expand a few hundred bytes into gigabytes."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not allowed in a config",
-                                              mark)
-        return super().compose_node(parent, index)
-
-
-def read_yaml(path: str | Path, what: str = "config"):
-    """The YAML document at ``path`` as plain data (mappings, lists, scalars). Raises ValueError
-    naming the file and the reason for a missing or unreadable file, a file over 1 MiB, invalid
-    YAML, language tags (``!!python/...``) and aliases."""
-    path = Path(path)
-    try:
-        if path.stat().st_size > MAX_YAML_BYTES:
-            raise ValueError(f"{path}: the {what} is larger than {MAX_YAML_BYTES} bytes")
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ValueError(f"{path}: the {what} file does not exist") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: the {what} is not UTF-8 text") from None
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read the {what}: {exc.strerror}") from None
-    try:
-        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        detail = " ".join(str(exc).split())
-        raise ValueError(f"{path}: the {what} is not plain YAML data: {detail}") from None
-    except RecursionError:
-        raise ValueError(f"{path}: the {what} is nested too deeply") from None
 
 
 @dataclass(frozen=True)
@@ -69,6 +37,7 @@ class ProcessConfig(Config):
     YAML through the config helper (`datagen.config`: unknown keys refused, types checked)."""
 
     # --- validation (raw units of the input file) ---
+    max_mesh_bytes: int = MAX_MESH_BYTES  # larger mesh files are refused unread (file_too_large); not hashed
     max_faces: int = 500_000             # larger meshes are rejected (too_many_faces)
     max_abs_coordinate_raw: float = 1e4  # |coordinate| above this is rejected (huge_coordinates)
     min_volume_fraction: float = 1e-6    # hull volume / bbox-diagonal^3 below this: degenerate
@@ -98,6 +67,7 @@ class ProcessConfig(Config):
                 raise ConfigError(f"ProcessConfig.{what}")
 
         check_types(self)
+        need(self.max_mesh_bytes > 0, f"max_mesh_bytes must be > 0, got {self.max_mesh_bytes}")
         need(self.max_faces > 0, f"max_faces must be > 0, got {self.max_faces}")
         need(self.max_abs_coordinate_raw > 0, "max_abs_coordinate_raw must be > 0")
         need(0 <= self.min_volume_fraction < 1, "min_volume_fraction must be in [0, 1)")
@@ -123,6 +93,8 @@ class ProcessConfig(Config):
         return cls.from_dict(read_yaml(path, "processing config") or {}, where=str(path))
 
     def hash(self) -> str:
-        """sha256 of the canonical JSON of the config and PROCESS_VERSION (the cache key part)."""
-        blob = json.dumps({"v": PROCESS_VERSION, **self.to_dict()}, sort_keys=True)
+        """sha256 of the canonical JSON of the config and PROCESS_VERSION (the cache key part),
+        without the file-size cap (`_UNHASHED`)."""
+        fields = {k: v for k, v in self.to_dict().items() if k not in _UNHASHED}
+        blob = json.dumps({"v": PROCESS_VERSION, **fields}, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()

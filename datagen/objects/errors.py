@@ -12,7 +12,7 @@ import enum
 
 from datagen.errors import DatagenError
 
-__all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError"]
+__all__ = ["Reason", "ObjectError", "MeshProcessingError", "ManifestError", "SourceError", "check_manifest_file"]
 
 
 class Reason(str, enum.Enum):
@@ -20,6 +20,7 @@ class Reason(str, enum.Enum):
 
     MISSING_FILE = "missing_file"            # the mesh file does not exist
     NOT_A_FILE = "not_a_regular_file"        # a directory, device, FIFO or looping symlink
+    FILE_TOO_LARGE = "file_too_large"        # a file over its size cap (a mesh: ProcessConfig.max_mesh_bytes)
     UNREADABLE_MESH = "unreadable_mesh"      # the file is not a mesh the loader understands
     EMPTY_MESH = "empty_mesh"                # no vertices or no faces
     NON_FINITE = "non_finite_vertices"       # NaN or inf coordinates
@@ -65,6 +66,24 @@ class MeshProcessingError(ObjectError):
 
 class ManifestError(ObjectError):
     """A manifest file or line is invalid."""
+
+    @classmethod
+    def of_input(cls, exc) -> "ManifestError":
+        """The error of a manifest file that cannot be read (a `datagen._bounded.InputError`)."""
+        reason = {"missing_file": Reason.MISSING_FILE, "file_too_large": Reason.FILE_TOO_LARGE,
+                  "not_text": Reason.MALFORMED_LINE}.get(exc.reason, Reason.NOT_A_FILE)
+        return cls(reason, exc.path, exc.detail)
+
+
+def check_manifest_file(path) -> None:
+    """`ManifestError` unless ``path`` is a regular file within the manifest cap (nothing read;
+    for commands, before their heavy imports)."""
+    from datagen import _bounded
+
+    try:
+        _bounded.check_regular(path, _bounded.MANIFEST_BYTES, "manifest")
+    except _bounded.InputError as exc:
+        raise ManifestError.of_input(exc) from None
 
 
 class SourceError(ObjectError):

@@ -14,15 +14,16 @@ Ctrl-C ends a child at once and silently (`datagen._interrupt`, policy "die"); `
 (`Children`) lets the caller end the children of its running calls itself, when only it was
 interrupted.
 
-Before any child starts, the file is read and hashed here: a missing file (``missing_file``), one
-that is not a regular file inside the source root, or one whose bytes are not the manifest's
-sha256 (``sha256_mismatch``) is a failure, never a cache hit under the manifest's hash; a finished
-cache entry of those bytes is returned without starting a child.
+Only the path is checked here (inside its source root). Reading and hashing the file belong to
+the time-limited step in the child (`process_object`): a missing file (``missing_file``), one that
+is not a regular file or is over ``ProcessConfig.max_mesh_bytes`` (refused unread), or one whose
+bytes are not the manifest's sha256 (``sha256_mismatch``) is a failure, never a cache hit under the
+manifest's hash; a slow read (a hung network file system) is a ``timeout`` like a slow CoACD. A
+cache hit costs the child a read, a hash and a reply (milliseconds once a worker is running).
 """
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from pathlib import Path
 from typing import Callable
@@ -32,7 +33,7 @@ from .cache import cache_root
 from .config import ProcessConfig
 from .errors import ObjectError, Reason
 from .manifest import ManifestEntry
-from .process import ProcessedObject, as_object, cached, load_processed, process_object
+from .process import ProcessedObject, as_object, load_processed, process_object
 
 __all__ = ["Children", "process_isolated"]
 
@@ -104,19 +105,9 @@ def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path 
     ``children``: where the worker is registered while it runs). Never raises for a bad, slow
     or crashing object."""
     try:
-        ref = entry.ref()
-        sha = hashlib.sha256(ref.read_bytes()).hexdigest()
-        if sha != entry.sha256:
-            return _failed(entry, Reason.SHA_MISMATCH.value, f"{entry.id}: {Reason.SHA_MISMATCH.value}: file sha256 "
-                           f"{sha[:12]}... != manifest {entry.sha256[:12]}...; the file changed since the manifest "
-                           "was built: rebuild it")
-        hit = cached(ref, sha, cfg, root)
+        ref = entry.ref()  # inside its source root (the path only: no byte is read here)
     except ObjectError as exc:
         return _failed(entry, exc.reason.value, str(exc))
-    except OSError as exc:
-        return _failed(entry, "error", f"{entry.id}: {type(exc).__name__}: {exc}")
-    if hit is not None:
-        return hit
     worker = None
     try:
         for _ in range(2):  # an idle worker can have died since (Ctrl-C, OOM): one fresh retry
@@ -124,9 +115,10 @@ def process_isolated(entry: ManifestEntry, cfg: ProcessConfig, root: str | Path 
             if children is not None:
                 children._add(worker)
             try:
+                worker.wait_ready()  # its start (imports) is not the object's time
                 worker.submit((_reply, (step, entry, cfg.to_dict(), str(cache_root(root)))))
                 break
-            except (BrokenPipeError, ConnectionResetError):
+            except (BrokenPipeError, ConnectionResetError, EOFError, TimeoutError):
                 _release(worker, children, kill=True)
                 worker = None
         if worker is None:

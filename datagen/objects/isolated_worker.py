@@ -31,6 +31,7 @@ from datagen._interrupt import sigint_blocked
 __all__ = ["IsolatedWorker", "MAX_TASKS", "give", "serve", "take"]
 
 MAX_TASKS = 100  #: objects one worker serves before it is replaced
+START_TIMEOUT_S = 300.0  #: how long a new worker may take to import the processing code (a loaded machine)
 
 
 class IsolatedWorker:
@@ -50,7 +51,19 @@ class IsolatedWorker:
         self._requests = Connection(w_req, readable=False)
         self._results = Connection(r_res, writable=False)
         self.tasks = 0
+        self._ready = False
         self._requests.send(list(sys.path))
+
+    def wait_ready(self, timeout_s: float = START_TIMEOUT_S) -> None:
+        """Wait until the worker has imported the processing code (once): an object's time limit
+        then counts its processing, not the interpreter's start. `TimeoutError` after
+        ``timeout_s``, `EOFError` if the worker died starting."""
+        if self._ready:
+            return
+        if not self._results.poll(timeout_s):
+            raise TimeoutError
+        self._results.recv()  # ("ready", None)
+        self._ready = True
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -128,6 +141,9 @@ def _shutdown() -> None:
 def serve(requests: Connection, results: Connection) -> None:
     """The worker's loop: one reply per request until the caller closes the pipe."""
     sys.path[:] = requests.recv()
+    import datagen.objects.process  # noqa: F401 - the default step's imports (trimesh, CoACD, MuJoCo), once
+
+    results.send(("ready", None))
     while True:
         try:
             data = requests.recv_bytes()

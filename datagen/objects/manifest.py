@@ -19,13 +19,15 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 import re
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterable
 
+from datagen import _bounded
+from datagen._atomic import atomic_write_text
+
+from .config import MAX_MESH_BYTES
 from .errors import ManifestError, ObjectError, Reason, SourceError
 from . import task_objects
 from .sources import ObjectRef, canonical_source, iter_source, resolve
@@ -86,10 +88,11 @@ class ManifestEntry:
     split: str
 
     @classmethod
-    def of_ref(cls, ref: ObjectRef, scales: tuple = (), split: str = "train") -> "ManifestEntry":
-        """The entry of ``ref`` with the sha256 of its bytes as they are now (read once here)."""
-        return cls(ref.object_id, ref.source, ref.path, ref.family,
-                   hashlib.sha256(ref.read_bytes()).hexdigest(), tuple(scales), split)
+    def of_ref(cls, ref: ObjectRef, scales: tuple = (), split: str = "train",
+               max_bytes: int = MAX_MESH_BYTES) -> "ManifestEntry":
+        """The entry of ``ref`` with the sha256 of its bytes as they are now (streamed once here;
+        a file over ``max_bytes`` is a ``file_too_large`` MeshProcessingError)."""
+        return cls(ref.object_id, ref.source, ref.path, ref.family, ref.sha256(max_bytes), tuple(scales), split)
 
     def ref(self) -> ObjectRef:
         """The ObjectRef to read this object (the path is checked against the source root)."""
@@ -119,11 +122,11 @@ class Rejected:
 
 def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEFAULT_SCALES,
                    test_fraction: float = 0.1, progress: bool = False,
-                   rejected: list | None = None) -> list[ManifestEntry]:
+                   rejected: list | None = None, max_mesh_bytes: int = MAX_MESH_BYTES) -> list[ManifestEntry]:
     """Enumerate a source and hash each raw mesh. Every entry is validated exactly as
     `load_manifest` validates a line, so a built manifest always loads. Objects that cannot be
-    entries (a missing or unreadable file, a directory or device, a path or symlink leaving the
-    source root) are appended to ``rejected`` as `Rejected`, or, when it is None, logged as
+    entries (a missing or unreadable file, a directory or device, a file over ``max_mesh_bytes``,
+    a path or symlink leaving the source root) are appended to ``rejected`` as `Rejected`, or, when it is None, logged as
     warnings (logger ``datagen.objects.manifest``; the command line prints them on stderr). ``count`` counts accepted objects (a rejected file does not take an object's place).
     Objects of the ``tasks`` source get their own scale instead of ``scales``."""
     scales = tuple(scales)
@@ -157,7 +160,7 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
             resolve(ref.source, ref.path, ref.object_id, ref.family)  # inside the root, before reading
             # a task object has one scale, its own: its virtual joint's anchor is in metres at it
             sc = (task_objects.build(ref.path).scale_m,) if ref.source == "tasks" else scales
-            e = ManifestEntry.of_ref(ref, sc, split_of(ref.object_id, test_fraction))
+            e = ManifestEntry.of_ref(ref, sc, split_of(ref.object_id, test_fraction), max_mesh_bytes)
             out.append(_entry(json.loads(e.to_json()), ref.object_id))  # the loader's own checks
         except ObjectError as exc:
             reject(ref, exc)
@@ -165,18 +168,10 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
 
 
 def write_manifest(entries: Iterable[ManifestEntry], path: str | Path) -> Path:
-    """Write atomically (temp file + rename)."""
+    """Write atomically (`datagen._atomic`: a temp file renamed into place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            for e in entries:
-                fh.write(e.to_json() + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    atomic_write_text(path, "".join(e.to_json() + "\n" for e in entries))
     return path
 
 
@@ -222,26 +217,21 @@ def load_manifest(path: str | Path, check_paths: bool = True) -> list[ManifestEn
     path = Path(path)
     entries, seen = [], {}
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ManifestError(Reason.MISSING_FILE, str(path), "the manifest file does not exist") from None
-    except UnicodeDecodeError as exc:
-        raise ManifestError(Reason.MALFORMED_LINE, str(path), f"not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise ManifestError(Reason.NOT_A_FILE, str(path), f"cannot read the manifest: {exc.strerror}") from None
-    for n, line in enumerate(text.splitlines(), 1):
-        if not line.strip():
-            continue
-        where = f"{path}:{n}"
-        try:
-            obj = json.loads(line)
-        except json.JSONDecodeError as exc:
-            raise ManifestError(Reason.MALFORMED_LINE, where, f"not JSON ({exc.msg})") from exc
-        except RecursionError:
-            raise ManifestError(Reason.MALFORMED_LINE, where, "JSON nested too deeply") from None
-        e = _entry(obj, where, check_paths)
-        if e.id in seen:
-            raise ManifestError(Reason.DUPLICATE_ID, where, f"id {e.id!r} already on line {seen[e.id]}")
-        seen[e.id] = n
-        entries.append(e)
+        for n, line in _bounded.iter_lines(path, _bounded.MANIFEST_BYTES, _bounded.MANIFEST_LINE_BYTES, "manifest"):
+            if not line.strip():
+                continue
+            where = f"{path}:{n}"
+            try:
+                obj = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise ManifestError(Reason.MALFORMED_LINE, where, f"not JSON ({exc.msg})") from exc
+            except RecursionError:
+                raise ManifestError(Reason.MALFORMED_LINE, where, "JSON nested too deeply") from None
+            e = _entry(obj, where, check_paths)
+            if e.id in seen:
+                raise ManifestError(Reason.DUPLICATE_ID, where, f"id {e.id!r} already on line {seen[e.id]}")
+            seen[e.id] = n
+            entries.append(e)
+    except _bounded.InputError as exc:
+        raise ManifestError.of_input(exc) from None
     return entries

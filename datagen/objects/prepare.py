@@ -2,7 +2,7 @@
 
 Each object is processed in its own process with a time limit (`isolate.process_isolated`): one
 that hangs or crashes CoACD is a ``timeout`` or ``crashed`` failure naming it, and the others are
-processed all the same. Cache hits start no process.
+processed all the same. A cache hit is answered by an already running worker (a read and a hash).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def prepare(manifest: str | Path | list[ManifestEntry], cfg: ProcessConfig | Non
             root: str | Path | None = None, workers: int = 1, progress: bool = True,
             limit: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S, *,
             step: Step = process_object) -> list[dict]:
-    """Process every manifest object (cache hits are free), each in its own process killed after
+    """Process every manifest object (cache hits are cheap), each in its own process killed after
     ``timeout_s`` seconds, ``workers`` at a time. Returns one status dict per object, in manifest
     order: id, status ('ok'/'failed'), reason, message, entry, cache_hit, pieces, timings
     (seconds per stage). Temp dirs left by killed runs (> 6 h old) are removed first. ``step``:
@@ -75,13 +75,26 @@ def prepare(manifest: str | Path | list[ManifestEntry], cfg: ProcessConfig | Non
     return out
 
 
-def summarize(results: list[dict]) -> str:
-    """One line: counts of ok, cache hits and failures by reason."""
-    reasons = collections.Counter(r["reason"] for r in results if r["status"] != "ok")
+SHOWN_FAILURES = 10  #: failed objects `summarize` names one per line
+
+
+def summarize(results: list[dict], results_path: str | Path | None = None) -> str:
+    """Counts of ok, cache hits and failures by reason on the first line; then each failed
+    object (its message, up to `SHOWN_FAILURES`) and where the full list is (``results_path``,
+    the ``--results`` file) or how to get it."""
+    failed = [r for r in results if r["status"] != "ok"]
+    reasons = collections.Counter(r["reason"] for r in failed)
     ok = sum(r["status"] == "ok" for r in results)
     hits = sum(bool(r["cache_hit"]) for r in results)
     fails = ", ".join(f"{k}: {v}" for k, v in sorted(reasons.items())) or "none"
-    return f"{len(results)} objects: {ok} ok, {hits} cache hits; failures: {fails}"
+    lines = [f"{len(results)} objects: {ok} ok, {hits} cache hits; failures: {fails}"]
+    lines += [f"  {r['message'] or r['id'] + ': ' + r['reason']}" for r in failed[:SHOWN_FAILURES]]
+    if len(failed) > SHOWN_FAILURES:
+        lines.append(f"  ... and {len(failed) - SHOWN_FAILURES} more")
+    if failed:
+        lines.append(f"every object's status: {results_path}" if results_path else
+                     "every object's status, one JSON line each: rerun with --results FILE (cache hits are cheap)")
+    return "\n".join(lines)
 
 
 def write_results(results: list[dict], path: str | Path) -> None:

@@ -20,17 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
+from datagen import _bounded
+
 from . import layout, task_objects
 from .cache import atomic_entry, cache_root, entry_dir
 from .coacd_step import decompose, pieces_from_meshes
-from .config import PROCESS_VERSION, ProcessConfig
+from .config import MAX_MESH_BYTES, PROCESS_VERSION, ProcessConfig
 from .errors import MeshProcessingError, Reason
 from .mesh_ops import load_mesh_bytes, normalize, obj_bytes, repair, validate
 from .mjcf import check_mjcf, object_mjcf
 from .sources import ObjectRef
 from .surface import watertight_surface
 
-__all__ = ["ProcessedObject", "process_object", "load_processed", "object_key", "cached", "as_object"]
+__all__ = ["ProcessedObject", "process_object", "load_processed", "object_key", "as_object", "read_meta"]
 
 
 @dataclass(frozen=True)
@@ -83,12 +85,23 @@ class ProcessedObject:
     @property
     def meta(self) -> dict:
         """The entry's meta.json (config, normalization, pieces, timings, versions)."""
-        return json.loads((self.entry / layout.META).read_text())
+        return read_meta(self.entry)
+
+
+def read_meta(entry: Path) -> dict:
+    """A processed object's meta.json; ValueError (`datagen._bounded.InputError`) naming the file
+    when it is missing, unreadable or not JSON, with the remedy: remove the entry, which is then
+    rebuilt."""
+    try:
+        return _bounded.read_json(Path(entry) / layout.META, "processed object's meta.json")
+    except _bounded.InputError as exc:
+        raise _bounded.InputError(exc.path, exc.reason, exc.detail,
+                                  f"remove {entry} and rerun: the object is processed again") from None
 
 
 def load_processed(entry: Path, cache_hit: bool = True) -> ProcessedObject:
-    """Read a cache entry's meta.json (raises ValueError on a wrong meta version)."""
-    meta = json.loads((Path(entry) / layout.META).read_text())
+    """Read a cache entry's meta.json (raises ValueError naming it, also on a wrong meta version)."""
+    meta = read_meta(entry)
     if meta.get("meta_version") != layout.META_VERSION:
         raise ValueError(f"{entry}: meta_version {meta.get('meta_version')} != {layout.META_VERSION}")
     return ProcessedObject(
@@ -106,7 +119,7 @@ def object_key(ref: ObjectRef, mesh_sha256: str) -> str:
     parts = [mesh_sha256, ref.file_type]
     if ref.source == "tasks":  # pieces come from the task object's builder, not from CoACD
         parts.append(f"tasks:{ref.path}")
-    parts += [hashlib.sha256(p.read_bytes()).hexdigest() for p in ref.piece_files()]
+    parts += [_bounded.sha256_file(p, MAX_MESH_BYTES, "convex piece")[0] for p in ref.piece_files()]
     return hashlib.sha256("|".join(parts).encode()).hexdigest()
 
 
@@ -119,12 +132,6 @@ def as_object(p: ProcessedObject, ref: ObjectRef) -> ProcessedObject:
     if not p.ok:
         message = f"{ref.object_id}: {p.reason}: {p.meta.get('detail', p.message)}"
     return replace(p, object_id=ref.object_id, message=message)
-
-
-def cached(ref: ObjectRef, mesh_sha256: str, cfg: ProcessConfig, root: str | Path | None = None):
-    """The finished cache entry of ``ref`` (as `as_object`), or None."""
-    final = entry_dir(cache_root(root), object_key(ref, mesh_sha256), cfg.hash())
-    return as_object(load_processed(final), ref) if (final / layout.META).is_file() else None
 
 
 def _build(ref: ObjectRef, raw: bytes, cfg: ProcessConfig, tmp: Path, meta: dict) -> None:
@@ -154,7 +161,7 @@ def _build(ref: ObjectRef, raw: bytes, cfg: ProcessConfig, tmp: Path, meta: dict
     elif existing:  # DexGraspNet pieces: same normalization as their decomposed.obj
         parts = []
         for p in existing:
-            m = load_mesh_bytes(p.read_bytes(), "obj", f"{thing}/{p.name}")
+            m = load_mesh_bytes(_bounded.read_bytes(p, MAX_MESH_BYTES, "convex piece"), "obj", f"{thing}/{p.name}")
             parts.append(((np.asarray(m.vertices) - centre) * factor, m.faces))
         pieces, meta["pieces_origin"] = pieces_from_meshes(parts, cfg, thing), "reused"
     else:
@@ -198,17 +205,18 @@ def process_object(ref: ObjectRef, cfg: ProcessConfig | None = None,
     """
     cfg = cfg or ProcessConfig()
     try:
-        raw = ref.read_bytes()
+        raw = ref.read_bytes(cfg.max_mesh_bytes)
     except MeshProcessingError as exc:
         return ProcessedObject(ref.object_id, "failed", exc.reason.value, str(exc))
     sha, chash = hashlib.sha256(raw).hexdigest(), cfg.hash()
     if expected_sha256 is not None and sha != expected_sha256:
         return ProcessedObject(ref.object_id, "failed", Reason.SHA_MISMATCH.value,
-                               f"{ref.object_id}: sha256_mismatch: file sha256 {sha[:12]}... "
-                               f"!= manifest {expected_sha256[:12]}...; rebuild the manifest")
+                               f"{ref.object_id}: {Reason.SHA_MISMATCH.value}: file sha256 {sha[:12]}... != manifest "
+                               f"{expected_sha256[:12]}...; the file changed since the manifest was built: rebuild it",
+                               mesh_sha256=expected_sha256)
     try:
         key = object_key(ref, sha)
-    except (OSError, MeshProcessingError) as exc:
+    except (OSError, ValueError, MeshProcessingError) as exc:  # ValueError: datagen._bounded.InputError
         return ProcessedObject(ref.object_id, "failed", Reason.MISSING_FILE.value,
                                f"{ref.object_id}: {Reason.MISSING_FILE.value}: its pieces cannot be read: {exc}")
     final = entry_dir(cache_root(root), key, chash)

@@ -26,14 +26,15 @@ Paths are always relative to the source root; ``resolve`` rejects any that escap
 from __future__ import annotations
 
 import hashlib
-import os
 import re
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+from datagen import _bounded
+
 from . import procedural, task_objects
+from .config import MAX_MESH_BYTES
 from .errors import ManifestError, MeshProcessingError, Reason, SourceError
 from .mesh_ops import MESH_EXTENSIONS
 
@@ -58,32 +59,39 @@ class ObjectRef:
         root = _root(self.source)
         return None if root is None else root / self.path
 
-    def read_bytes(self) -> bytes:
-        """The raw mesh bytes; MeshProcessingError(missing_file) if the file is gone."""
+    def read_bytes(self, max_bytes: int = MAX_MESH_BYTES) -> bytes:
+        """The raw mesh bytes (a file of at most ``max_bytes``); MeshProcessingError naming the
+        file: ``missing_file`` if it is gone, ``not_a_regular_file`` for a directory, device, FIFO
+        or socket (refused before reading), ``file_too_large`` over ``max_bytes``."""
         if self.source == "tasks":
             return task_objects.obj_bytes(self.path)
         if self.file is None:
             seed, index = _procedural_seed(self.source), int(self.path)
             return procedural.generate(seed, index).obj_bytes
         try:
-            st = os.stat(self.file)  # follows symlinks
-        except FileNotFoundError as exc:
-            raise MeshProcessingError(Reason.MISSING_FILE, self.object_id,
-                                      f"mesh file {self.file} does not exist") from exc
-        except OSError as exc:  # a looping symlink, a path through a file, no permission
-            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id,
-                                      f"{self.file} cannot be opened: {exc.strerror}") from exc
-        if not stat.S_ISREG(st.st_mode):  # never read a directory, a FIFO or /dev/zero
-            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id, f"{self.file} is {kind}")
+            return _bounded.read_bytes(self.file, max_bytes, "mesh")
+        except _bounded.InputError as exc:
+            raise self._error(exc) from None
+
+    def sha256(self, max_bytes: int = MAX_MESH_BYTES) -> str:
+        """sha256 (hex) of the raw mesh bytes, a file streamed in chunks (errors as `read_bytes`)."""
+        if self.file is None:
+            return hashlib.sha256(self.read_bytes()).hexdigest()
         try:
-            return self.file.read_bytes()
-        except FileNotFoundError as exc:
-            raise MeshProcessingError(Reason.MISSING_FILE, self.object_id,
-                                      f"mesh file {self.file} does not exist") from exc
-        except OSError as exc:
-            raise MeshProcessingError(Reason.NOT_A_FILE, self.object_id,
-                                      f"{self.file} cannot be read: {exc.strerror}") from exc
+            return _bounded.sha256_file(self.file, max_bytes, "mesh")[0]
+        except _bounded.InputError as exc:
+            raise self._error(exc) from None
+
+    def _error(self, exc) -> MeshProcessingError:
+        reason = {_bounded.NOT_FOUND: Reason.MISSING_FILE, _bounded.TOO_LARGE: Reason.FILE_TOO_LARGE}.get(
+            exc.reason, Reason.NOT_A_FILE)
+        if reason is Reason.MISSING_FILE:
+            return MeshProcessingError(reason, self.object_id, f"mesh file {self.file} does not exist")
+        remedy = " (raise ProcessConfig.max_mesh_bytes, the job's process: {max_mesh_bytes: N}, to allow it)" \
+            if reason is Reason.FILE_TOO_LARGE else ""
+        detail = exc.detail.removeprefix("the mesh ")
+        where = f"{self.file} " if detail != exc.detail else f"{self.file}: "
+        return MeshProcessingError(reason, self.object_id, where + detail + remedy)
 
     def piece_files(self) -> list[Path]:
         """Existing CoACD pieces next to a DexGraspNet decomposed.obj, in index order."""

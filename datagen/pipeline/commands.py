@@ -37,8 +37,10 @@ def read_config(path: str | None) -> dict:
     """The config file's mapping ({} for None): bounded YAML (`datagen.objects.config.read_yaml`);
     raises `ConfigError` naming the file for anything but a mapping, and for SynthConfig fields at
     the top level (they belong under ``synth:``)."""
+    from datagen.config import read_yaml
     from datagen.errors import ConfigError
-    from datagen.objects.config import read_yaml
+    from datagen.eval.config import EvalConfig
+    from datagen.objects.config import ProcessConfig
     from datagen.synth import SynthConfig
 
     if path is None:
@@ -51,9 +53,10 @@ def read_config(path: str | None) -> dict:
         return {}
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: a config must be a mapping (preset, synth, eval, process, ...)")
-    loose = sorted(set(data) & set(SynthConfig.__dataclass_fields__))
-    if loose:
-        raise ConfigError(f"{path}: SynthConfig fields {loose} at the top level", "put them under `synth:`")
+    for part, cls in (("synth", SynthConfig), ("eval", EvalConfig), ("process", ProcessConfig)):
+        loose = sorted(set(data) & set(cls.__dataclass_fields__))
+        if loose:
+            raise ConfigError(f"{path}: {cls.__name__} fields {loose} at the top level", f"put them under `{part}:`")
     return data
 
 
@@ -145,16 +148,20 @@ def register_prepare(sub: argparse._SubParsersAction) -> None:
 
 
 def _prepare(args) -> int:
+    from datagen.objects.errors import check_manifest_file
+
+    check_manifest_file(args.manifest)  # refused before the imports below
+    config = read_config(args.config)
     from datagen.objects.prepare import DEFAULT_TIMEOUT_S, prepare, summarize, write_results
 
     from .recipe import resolve
 
-    cfg = resolve(preset=args.preset, config=read_config(args.config), where=args.config or "config").process
+    cfg = resolve(preset=args.preset, config=config, where=args.config or "config").process
     results = prepare(args.manifest, cfg, args.cache, args.workers, progress=True, limit=args.limit,
                       timeout_s=DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout)
     if args.results:
         write_results(results, args.results)
-    print(summarize(results))
+    print(summarize(results, args.results))
     return 0
 
 

@@ -13,7 +13,8 @@ layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``pro
 
 A key a layer lacks is unset, and the layer below decides; a key a layer sets wins, even when
 it equals a default (``--seeds 1`` is one seed on every task). Nested mappings (``weights``,
-``contact``) merge key by key. The result is a frozen `Recipe`: what a job records in job.json
+``contact``) merge key by key. The squeeze is computed for the evaluation's actuator stiffness of
+the hand (`squeeze_kp`: its protocol's gains), never set on its own. The result is a frozen `Recipe`: what a job records in job.json
 and hashes, and what ``datagen synth`` writes into its table's metadata.
 """
 
@@ -103,6 +104,16 @@ def _layer(data: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
     return {k: data[k] for k in (*RECIPE_KEYS, "preset") if data.get(k) is not None}
 
 
+def squeeze_kp(hand: str | Path, ev: EvalConfig) -> float:
+    """The stiffness (N m/rad) of the hand's finger actuators in the evaluation: the squeeze is
+    computed for it (`datagen.eval.protocol.hand_gains`; a spec path's hand by its spec's name)."""
+    from datagen.eval.protocol import hand_gains
+    from datagen.hands import BUILTIN_HANDS, load_spec
+
+    name = str(hand) if str(hand) in BUILTIN_HANDS else load_spec(hand).name
+    return float(hand_gains(ev, name, 0.0).kp)
+
+
 def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset: str | None = None,
             config: Mapping[str, Any] | None = None, flags: Mapping[str, Any] | None = None,
             where: str = "config") -> Recipe:
@@ -121,7 +132,7 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
     spec = load_task(task)
     merged = merge_layers(PRESETS[name], {"synth": dict(spec.synth)}, user, explicit)
     ev = EvalConfig.from_dict(merged.get("eval"), where=f"{where}: eval")
-    synth = SynthConfig.from_dict({**merged.get("synth", {}), "task": spec.name, "squeeze_kp": ev.actuator_kp},
+    synth = SynthConfig.from_dict({**merged.get("synth", {}), "task": spec.name, "squeeze_kp": squeeze_kp(hand, ev)},
                                   where=f"{where}: synth (task {spec.name!r})")
     process = ProcessConfig.from_dict(merged.get("process"), where=f"{where}: process")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,

@@ -53,7 +53,7 @@ class SynthConfig(Config):
     squeeze_force_n: float = 10.0  #: largest fingertip grip force of the squeeze, N (best of 2/4/10/20 in MuJoCo holds)
     squeeze_gap_m: float = 0.002  #: extra fingertip travel along the normal at the squeeze (sphere overshoot), m
     squeeze_kp: float = 5.0  #: position-actuator stiffness the squeeze is computed for, N m/rad: the evaluation's
-                             #: ``actuator_kp``, copied in by the resolver (not a setting of its own)
+                             #: for this hand (its protocol's gains), set by the resolver (not a setting of its own)
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
     sphere_margin_m: float | None = None  #: m collision spheres may sink into the object (None: the hand spec's)
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)

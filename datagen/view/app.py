@@ -6,11 +6,13 @@
 The page's panel: filters (verdict, failure reason, task, hand, scale), the object picker,
 the grasp number with previous / next buttons, the pose slider (pregrasp, grasp, squeeze,
 simulated: see `datagen.view.posing`), layer switches, and the row's numbers
-(`datagen.view.panel`). The GUI is shared by every connected browser tab.
+(`datagen.view.panel`). The GUI is shared by every connected browser tab. Only pages the
+server itself served may open its WebSocket (`same_origin`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 
 import numpy as np
@@ -20,9 +22,49 @@ from .panel import row_markdown
 from .posing import STATES, SceneCache
 from .source import VERDICTS, GraspSource
 
-__all__ = ["Browser", "ANY"]
+__all__ = ["Browser", "ANY", "same_origin"]
 
 ANY = "(any)"
+
+
+_SERVE_LOCK = threading.Lock()
+
+
+def same_origin(process_request=None):
+    """A websockets ``process_request`` hook refusing (403) a WebSocket upgrade whose ``Origin``
+    is not the page's own (``http://`` + its ``Host``): another site open in the user's browser
+    cannot drive the viewer or read the dataset through it (cross-site WebSocket hijacking).
+    A request without ``Origin`` (not a browser) is let through; others go to ``process_request``."""
+    import http
+
+    def check(connection, request):
+        if request.headers.get("Upgrade", "").lower() == "websocket":
+            origin, host = request.headers.get("Origin"), request.headers.get("Host", "")
+            if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
+                return connection.respond(http.HTTPStatus.FORBIDDEN, f"cross-origin WebSocket from {origin} refused\n")
+            return None
+        return process_request(connection, request) if process_request is not None else None
+    return check
+
+
+@contextlib.contextmanager
+def _same_origin_websockets():
+    """While a viser server starts (it binds in ``ViserServer()``), its websockets ``serve`` gets
+    the `same_origin` check in front of viser's own request hook (viser has no option for it)."""
+    import websockets.asyncio.server as ws_server
+
+    with _SERVE_LOCK:
+        real = ws_server.serve
+
+        def serve(*args, **kwargs):
+            kwargs["process_request"] = same_origin(kwargs.get("process_request"))
+            return real(*args, **kwargs)
+
+        ws_server.serve = serve
+        try:
+            yield
+        finally:
+            ws_server.serve = real
 
 
 def _options(labels: list[str]) -> tuple[str, ...]:
@@ -37,7 +79,8 @@ class Browser:
 
         self.source = source
         self.cache = SceneCache(source.eval_config, base=source.base)
-        self.server = viser.ViserServer(host=host, port=port, verbose=False, label="datagen view")
+        with _same_origin_websockets():
+            self.server = viser.ViserServer(host=host, port=port, verbose=False, label="datagen view")
         self.server.scene.set_up_direction("+z")
         self.drawing = GraspDrawing(self.server.scene)
         self._lock = threading.RLock()

@@ -26,8 +26,8 @@ def register_view(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=int, default=4, help="with --export: how many matching rows (default 4)")
     for name in ("verdict", "reason", "task", "hand", "object"):
         p.add_argument(f"--{name}", default=None, help=f"with --export: only rows of this {name}")
-    p.set_defaults(func=_view, interrupted="no page is half-written (with --export, index.html is written "
-                   "last); rerun the same command")
+    p.set_defaults(func=_view, interrupted="the viewer stopped (with --export: no page is half-written, index.html "
+                   "is written last; rerun the same command)")
 
 
 def _need_viser() -> None:
@@ -71,11 +71,8 @@ def _view(args) -> int:
         port = browser.server.get_port()
         print(f"  from another machine: ssh -L {port}:localhost:{port} USER@{socket.gethostname()}, "
               f"then open http://localhost:{port}/", file=sys.stderr, flush=True)
-    try:
+    try:  # until Ctrl-C: `datagen.cli.main` prints its one line and exits 130
         while True:
             time.sleep(3600)
-    except KeyboardInterrupt:
-        pass
     finally:
         browser.stop()
-    return 0

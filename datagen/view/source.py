@@ -23,6 +23,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from datagen.io import POSE_COLUMNS, layout, open_dataset, shard_paths
+from datagen.io.integrity import read_parquet
 from schemas import SchemaError, check_version
 
 __all__ = ["GraspSource", "INDEX_COLUMNS", "ViewError", "find_column", "open_source", "VERDICTS"]
@@ -81,7 +82,7 @@ class GraspSource:
             raise ViewError(self.where, f"missing columns {missing}",
                             "view a datagen job, a shard or a `datagen synth` / `datagen eval` table")
         index = [c for c in (find_column(names, stem) for stem in INDEX_COLUMNS) if c is not None]
-        parts = [pq.read_table(f, columns=index) for f in self.files]
+        parts = [read_parquet(f, index) for f in self.files]  # page checksums verified: a damaged file is named
         self._starts = np.cumsum([0] + [p.num_rows for p in parts])
         self._index = pa.concat_tables(parts) if len(parts) > 1 else parts[0]
         if self._index.num_rows == 0:
@@ -162,7 +163,7 @@ class GraspSource:
         """Row ``i`` as a dict of Python values (every column)."""
         f, j = self._locate(i)
         if f not in self._tables:
-            self._tables[f] = pq.read_table(self.files[f])
+            self._tables[f] = read_parquet(self.files[f])
             while len(self._tables) > self._cached_files:
                 self._tables.popitem(last=False)
         self._tables.move_to_end(f)

@@ -77,6 +77,34 @@ def test_eval_cli_reports_missing_columns(tmp_path, capsys):
     assert "missing columns" in capsys.readouterr().err
 
 
+def test_eval_reads_objects_only_from_the_table_dir_or_the_cache(table_path, tmp_path, capsys, monkeypatch):
+    from datagen.gl import GLUnavailable, select_backend
+
+    try:
+        select_backend()
+        commands = ("eval", "render")
+    except GLUnavailable:  # render refuses first for want of GL
+        commands = ("eval",)
+    monkeypatch.setenv("DATAGEN_CACHE", str(tmp_path / "cache"))
+    entry = table_path.parent / "entry_box"
+    one = pq.read_table(table_path).slice(0, 1)
+    for where in ("/etc", "../../etc", str(entry)):  # the last: another table's object, by absolute path
+        path = tmp_path / "t.parquet"
+        pq.write_table(one.set_column(one.schema.get_field_index("object_path"), "object_path", pa.array([where])),
+                       path)
+        for command in commands:
+            out = tmp_path / ("o.parquet" if command == "eval" else "r")
+            assert main([command, str(path), "--out", str(out)]) == 2
+            err = capsys.readouterr().err
+            assert f"row 0 (object 'box'): object_path {where!r} resolves to " in err, err
+            assert f"outside {tmp_path} and {tmp_path / 'cache'} (pass --allow-outside" in err, err
+            assert not (tmp_path / "o.parquet").exists() and not (tmp_path / "r").exists()
+    # the objects cache is allowed, and --allow-outside lifts the check (the row is then evaluated)
+    assert main(["eval", str(path), "--out", str(tmp_path / "o.parquet"), "--cache", str(entry.parent)]) == 0
+    assert main(["eval", str(path), "--out", str(tmp_path / "o2.parquet"), "--allow-outside"]) == 0
+    assert pq.read_table(tmp_path / "o2.parquet")["reason"].to_pylist() == ["ok"]
+
+
 def _datagen(args: list[str], **env) -> subprocess.CompletedProcess:
     """``python -m datagen.cli ARGS`` in a fresh process, environment changes in ``env`` (None unsets)."""
     e = {**os.environ, **{k: v for k, v in env.items() if v is not None}}

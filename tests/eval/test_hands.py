@@ -20,11 +20,12 @@ def test_hand_scene_and_free_flight(name, box_dir):
     torch.set_num_threads(1)
     hand = load_hand(name)
     pieces = box_pieces((0.03, 0.02, 0.025), box_dir, name=f"box_{name}")
-    cfg = EvalConfig(min_touching_links=0, stop_at_first_failure=False)
+    # protocol uniform: the same gains for every hand (the default's per-hand gains: test_protocol.py)
+    cfg = EvalConfig(min_touching_links=0, stop_at_first_failure=False, protocol="uniform")
     with Evaluator(hand, cfg) as ev:
         scene, _ = ev.scene(pieces)
         m = scene.model
-        # the protocol's gains on every hand actuator, contact parameters on every geom
+        # the uniform gains on every hand actuator, contact parameters on every geom
         assert np.all(m.actuator_gainprm[scene.actuators, 0] == 5.0)
         assert np.all(m.actuator_biasprm[scene.actuators, 1] == -5.0)
         assert np.all(m.actuator_forcerange[scene.actuators] == [-3.0, 3.0])

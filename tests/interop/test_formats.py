@@ -69,12 +69,23 @@ def _table(path: Path, hand: str, poses: np.ndarray, scale: float = 0.08) -> Pat
     return path
 
 
-def _our_tips(hand, pose: np.ndarray) -> np.ndarray:
+def _shared_links(model: mujoco.MjModel, hand) -> list[str]:
+    """Our links that the peer's model has too (the Shadow E3M5's forearm and wrist it has not)."""
+    return [n for n in hand.link_names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"peer_{n}") >= 0]
+
+
+def _our_tips(hand, pose: np.ndarray, links: list[str] | None = None) -> np.ndarray:
+    """(F [+ L], 3): the fingertip points, then the origins of ``links``, by our kinematics."""
     p = torch.as_tensor(np.asarray(pose, dtype=np.float64))
-    return hand.fingertip_points(p[:7], p[7:]).numpy()
+    out = [hand.fingertip_points(p[:7], p[7:]).numpy()]
+    if links:
+        T = hand.link_poses(p[None, :7], p[None, 7:])
+        out.append(np.stack([T[n][0, :3, 3].numpy() for n in links]))
+    return np.concatenate(out)
 
 
-def _peer_tips(model: mujoco.MjModel, hand, qpos: np.ndarray) -> np.ndarray:
+def _peer_tips(model: mujoco.MjModel, hand, qpos: np.ndarray, links: list[str] | None = None) -> np.ndarray:
+    """The same points by MuJoCo's kinematics of the peer's model at its qpos."""
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
@@ -83,6 +94,7 @@ def _peer_tips(model: mujoco.MjModel, hand, qpos: np.ndarray) -> np.ndarray:
         tip = hand.spec.fingertips[name]
         b = model.body(f"peer_{tip.link}").id
         out.append(data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(tip.point))
+    out += [data.xpos[model.body(f"peer_{n}").id] for n in links or ()]
     return np.array(out)
 
 
@@ -107,6 +119,8 @@ def test_export_layout_and_fingertips(name, hands, exported):
     assert len(files) == len(rows)
     assert {f.parent.name for f in files} == {"scale008_pose000"}
     model = peer_model(name)
+    links = _shared_links(model, hand)
+    assert len(links) >= len(hand.link_names) - 2  # all but E3M5's forearm and wrist
     worst = 0.0
     for f in files:
         d = np.load(f, allow_pickle=True).item()
@@ -120,9 +134,9 @@ def test_export_layout_and_fingertips(name, hands, exported):
         assert d["obj_scale"] == pytest.approx(0.08) and np.allclose(d["obj_pose"], [0, 0, 0, 1, 0, 0, 0])
         for k in POSES:
             assert d[k].dtype == np.float32 and d[k].shape == (model.nq,)
-            err = np.linalg.norm(_peer_tips(model, hand, d[k]) - _our_tips(hand, row[k]), axis=-1).max()
+            err = np.linalg.norm(_peer_tips(model, hand, d[k], links) - _our_tips(hand, row[k], links), axis=-1).max()
             worst = max(worst, err)
-    assert worst < TOL_M, f"{name}: fingertips {worst * 1000:.3f} mm apart"
+    assert worst < TOL_M, f"{name}: fingertips and bodies {worst * 1000:.3f} mm apart"
 
 
 @pytest.mark.parametrize("name", HANDS)
@@ -195,24 +209,35 @@ def test_hand_the_peer_lacks_is_refused(tmp_path, capsys):
     assert "DexGraspBench has no model of it" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("name", ["shadow_e3m5", "allegro"])
-def test_export_against_the_peers_own_xml(name, hands, exported):
-    """With DEXGRASPBENCH_DIR pointing at a DexGraspBench checkout, its own hand XMLs check the export."""
+def _peer_xml(name: str) -> Path:
+    """The peer's own hand XML in the DexGraspBench checkout DEXGRASPBENCH_DIR names (skips
+    without one; LEAP's includes MuJoCo Menagerie's, its third_party submodule)."""
     root = os.environ.get("DEXGRASPBENCH_DIR")
-    if not root or name not in hands:
+    if not root:
         pytest.skip("set DEXGRASPBENCH_DIR to a DexGraspBench checkout (and make hands)")
     xml = Path(root) / "assets" / "hand" / ("shadow" if name == "shadow_e3m5" else name) / "right_hand.xml"
-    if not xml.is_file():
-        pytest.skip(f"{xml} not found")
+    menagerie = Path(root) / "third_party" / "mujoco_menagerie" / "leap_hand" / "right_hand.xml"
+    if not xml.is_file() or (name == "leap" and not menagerie.is_file()):
+        pytest.skip(f"{xml} (or the Menagerie file it includes) not found")
+    return xml
+
+
+@pytest.mark.parametrize("name", HANDS)
+def test_export_against_the_peers_own_xml(name, hands, exported):
+    """With DEXGRASPBENCH_DIR pointing at a DexGraspBench checkout, its own hand XMLs check the
+    export: every body the two models share and every fingertip within 1 mm."""
+    xml = _peer_xml(name)
     hand, (rows, out) = hands[name], exported[name]
     model = peer_model(name, xml)
+    links = _shared_links(model, hand)
+    assert len(links) >= len(hand.link_names) - 2
     worst = 0.0
     for f in sorted((out / "graspdata").rglob("*.npy")):
         d = np.load(f, allow_pickle=True).item()
         for k in POSES:
-            err = np.linalg.norm(_peer_tips(model, hand, d[k]) - _our_tips(hand, rows[d["grasp_id"]][k]), axis=-1)
-            worst = max(worst, err.max())
-    assert worst < TOL_M, f"{name}: fingertips {worst * 1000:.3f} mm apart"
+            ours = _our_tips(hand, rows[d["grasp_id"]][k], links)
+            worst = max(worst, np.linalg.norm(_peer_tips(model, hand, d[k], links) - ours, axis=-1).max())
+    assert worst < TOL_M, f"{name}: fingertips and bodies {worst * 1000:.3f} mm apart"
 
 
 def _rot(q_wxyz) -> np.ndarray:
@@ -220,6 +245,11 @@ def _rot(q_wxyz) -> np.ndarray:
 
     q = np.asarray(q_wxyz, dtype=np.float64)
     return Rotation.from_quat(q[[1, 2, 3, 0]] / np.linalg.norm(q)).as_matrix()
+
+
+# BODex's joint order (its kinematics': Shadow's thumb block first), by our joint names
+BODEX_ORDER = {"shadow_e3m5": [f"rh_TH{j}" for j in ("J5", "J4", "J3", "J2", "J1")]
+               + [f"rh_{f}J{j}" for f, n in (("FF", 4), ("MF", 4), ("RF", 4), ("LF", 5)) for j in range(n, 0, -1)]}
 
 
 def _bodex_pose(name: str, dgb: np.ndarray) -> np.ndarray:
@@ -274,6 +304,23 @@ def test_bodex_import(name, hands, exported, tmp_path):
         for key in POSES:
             worst = max(worst, np.linalg.norm(_our_tips(hand, r[key]) - _our_tips(hand, ref[key]), axis=-1).max())
     assert worst < TOL_M, f"{name}: BODex fingertips {worst * 1000:.3f} mm from the originals"
+
+    # a file that names its joints (BODex's URDF names, typed here from its URDFs and configs)
+    # is read by name, whatever the order
+    urdf_names = {"shadow_e3m5": [j for j in BODEX_ORDER["shadow_e3m5"]],
+                  "allegro": [f"joint_{i}.0" for i in range(16)],
+                  "leap": ["j1", "j0", "j2", "j3", "j5", "j4", "j6", "j7", "j9", "j8", "j10", "j11",
+                           "j12", "j13", "j14", "j15"]}[name]
+    perm = np.random.default_rng(5).permutation(len(urdf_names))
+    shuffled = np.concatenate([robot_pose[..., :7], robot_pose[..., 7:][..., perm]], axis=-1)
+    np.save(raw, {"robot_pose": shuffled.astype(np.float32), "joint_names": [urdf_names[i] for i in perm],
+                  "scene_path": ["/elsewhere/BODex/src/curobo/content/scene_cfg/box.npy"]}, allow_pickle=True)
+    assert main(args + ["--root", str(content)]) == 0
+    again = pq.read_table(table).to_pylist()
+    assert [r["grasp_qpos"] for r in again] == [r["grasp_qpos"] for r in got]
+    np.save(raw, {"robot_pose": shuffled.astype(np.float32), "joint_names": ["nope"] * len(perm),
+                  "scene_path": ["/elsewhere/BODex/src/curobo/content/scene_cfg/box.npy"]}, allow_pickle=True)
+    assert main(args + ["--root", str(content)]) == 2
 
 
 @pytest.fixture(scope="module")

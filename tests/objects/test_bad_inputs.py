@@ -113,3 +113,31 @@ def test_good_manifest_round_trips(tmp_path, box_obj):
     good, _ = _good_line(tmp_path, box_obj)
     entries = load_manifest(_write(tmp_path / "m.jsonl", [good]))
     assert write_manifest(entries, tmp_path / "n.jsonl").read_text() == (tmp_path / "m.jsonl").read_text()
+
+
+def test_a_mesh_over_its_size_cap_is_refused_unread(tmp_path, fast_cfg, box_obj):
+    import dataclasses
+    import resource
+
+    from datagen.objects.isolate import process_isolated
+
+    root = tmp_path / "meshes"
+    root.mkdir()
+    (root / "a_box.obj").write_bytes(box_obj)
+    with open(root / "huge.obj", "wb") as fh:  # 1 GiB that takes no disk: refused from its size
+        fh.truncate(1 << 30)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rejected = []
+    entries = build_manifest(f"dir:{root}", None, (0.08,), rejected=rejected)
+    assert [e.id for e in entries] == ["a_box.obj"]
+    (r,) = rejected
+    assert (r.id, r.reason) == ("huge.obj", "file_too_large")
+    assert r.message == (f"huge.obj: file_too_large: {root / 'huge.obj'} is 1 GiB, over its limit of 256 MiB (raise "
+                         "ProcessConfig.max_mesh_bytes, the job's process: {max_mesh_bytes: N}, to allow it)")
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss < 100 << 10  # KiB: nothing read
+    # the cap is a processing setting, outside the cache key: a small cap refuses a cached object too
+    small = dataclasses.replace(fast_cfg, max_mesh_bytes=100)
+    assert small.hash() == fast_cfg.hash()
+    p = process_isolated(entries[0], small, tmp_path / "cache", 120)
+    assert (p.status, p.reason) == ("failed", "file_too_large"), p.message
+    assert process_isolated(entries[0], fast_cfg, tmp_path / "cache", 120).ok

@@ -22,7 +22,7 @@ def test_manifest_build_then_prepare_twice(tmp_path, capsys, fast_cfg):
     lines = [json.loads(x) for x in out.read_text().splitlines()]
     assert [x["id"] for x in lines] == ["proc-s1-000000", "proc-s1-000001", "proc-s1-000002"]
     cfg = tmp_path / "fast.yaml"
-    cfg.write_text(yaml.safe_dump(fast_cfg.to_dict()))
+    cfg.write_text(yaml.safe_dump({"process": fast_cfg.to_dict()}))  # the config file's processing part
     results = tmp_path / "results.jsonl"
     args = ["prepare", "--manifest", str(out), "--config", str(cfg), "--cache",
             str(tmp_path / "cache"), "--results", str(results)]
@@ -48,7 +48,7 @@ def test_bad_manifest_is_a_clean_error(tmp_path, capsys):
 
 def test_bad_config_names_the_field(tmp_path, capsys):
     cfg = tmp_path / "c.yaml"
-    cfg.write_text("coacd_threshold: 0\nwrong_name: 1\n")
+    cfg.write_text("process: {coacd_threshold: 0, wrong_name: 1}\n")
     (tmp_path / "m.jsonl").write_text("")
     assert cli.main(["prepare", "--manifest", str(tmp_path / "m.jsonl"), "--config", str(cfg)]) == 2
     assert "coacd_threshold" in capsys.readouterr().err

@@ -54,8 +54,13 @@ def test_nested_mappings_merge_key_by_key_and_presets_differ_only_where_they_say
 
 
 def test_the_squeeze_is_computed_for_the_evaluations_actuator_gain():
+    from datagen.eval.protocol import PEER_GAINS
+
     r = resolve("shadow", config={"eval": {"actuator_kp": 3.0}})
     assert r.eval.actuator_kp == 3.0 and r.synth.squeeze_kp == 3.0
+    # the peer's gains for a hand it shares, under its protocol (the default); uniform: actuator_kp
+    assert resolve("leap").synth.squeeze_kp == PEER_GAINS["leap"].kp == 3.0
+    assert resolve("leap", config={"eval": {"protocol": "uniform"}}).synth.squeeze_kp == 5.0
     with pytest.raises(ConfigError, match="actuator_kp"):
         resolve("shadow", config={"synth": {"squeeze_kp": 3.0}})
 
@@ -75,6 +80,9 @@ def test_a_loose_synth_field_at_the_top_of_a_config_file_is_refused(tmp_path):
     (tmp_path / "old.yaml").write_text("iters: 200\n")
     with pytest.raises(ConfigError, match=r"old.yaml: SynthConfig fields \['iters'\] at the top level"):
         read_config(str(tmp_path / "old.yaml"))
+    (tmp_path / "proc.yaml").write_text("coacd_threshold: 0.05\n")
+    with pytest.raises(ConfigError, match=r"ProcessConfig fields \['coacd_threshold'\].*under `process:`"):
+        read_config(str(tmp_path / "proc.yaml"))
     (tmp_path / "new.yaml").write_text("synth: {iters: 200}\n")
     assert read_config(str(tmp_path / "new.yaml")) == {"synth": {"iters": 200}}
 
@@ -114,7 +122,7 @@ def test_library_call_synth_command_and_a_one_object_job_make_the_same_grasps(tm
     lib = datagen.synthesize("shadow", root / "box.obj", n=2, scales=(0.08,), cache=cache).to_pylist()
     assert main(["synth", "--object", str(root / "box.obj"), "--num", "2", "--cache", cache,
                  "--out", str(tmp_path / "g.parquet")]) == 0
-    assert main(["eval", str(tmp_path / "g.parquet"), "--out", str(tmp_path / "e.parquet")]) == 0
+    assert main(["eval", str(tmp_path / "g.parquet"), "--cache", cache, "--out", str(tmp_path / "e.parquet")]) == 0
     cli = pq.read_table(tmp_path / "e.parquet").to_pylist()
     (tmp_path / "job.yaml").write_text(yaml.safe_dump({"scales": [0.08]}))
     assert main(["run", "--out", str(tmp_path / "job"), "--source", f"dir:{root}", "--objects", "1", "--grasps", "2",

@@ -71,3 +71,40 @@ def test_no_match_clears_the_scene(browser):
     browser.f_verdict.value = "success" if browser.f_reason.value != "ok" else "failure"
     assert len(browser.rows) == 0 and browser.current is None
     assert "No grasp matches" in browser.panel.content
+
+
+def test_the_websocket_takes_only_pages_of_its_own_origin(browser):
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    port = browser.server.get_port()
+    url = f"ws://127.0.0.1:{port}/"
+    for origin in ("http://evil.example", f"http://127.0.0.1:{port + 1}", "null"):
+        with pytest.raises(InvalidStatus) as info:  # another site open in the user's browser
+            connect(url, origin=origin, open_timeout=20)
+        assert info.value.response.status_code == 403
+    with connect(url, origin=f"http://127.0.0.1:{port}", open_timeout=20) as ws:  # the page it served
+        assert ws.response.status_code == 101
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_viewer_with_one_line_and_130(job_dir):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "datagen.cli", "view", str(job_dir), "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        for line in proc.stdout:  # viser's banner first
+            if line.startswith("datagen view: "):  # serving
+                break
+        os.kill(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1].startswith("datagen view: interrupted; the viewer stopped"), err
+    assert "Traceback" not in err

@@ -16,7 +16,8 @@ from datagen.hands import load_hand, load_spec, make_spec
 from datagen.io import read_job
 from tests.hands.test_spec import write_toy_urdf
 from workers.job import JobDir, JobError, shard_slices
-from workers.run import merge_failures, pin_job_hand, prepare_manifest
+from workers.finished import merge_failures
+from workers.setup import pin_job_hand, prepare_manifest
 from workers.shard import run_shard
 
 from .conftest import tiny_config

@@ -15,9 +15,11 @@ import pytest
 import trimesh
 
 from datagen import cli
+from datagen.io import ShardError, integrity
 from schemas import SchemaError, check_version, columns
 from workers.job import JobConfig, JobDir
-from workers.run import _ray_temp_dir, prepare_manifest
+from workers.cluster import _ray_temp_dir
+from workers.setup import prepare_manifest
 
 from .conftest import TINY_EVAL, comparable_rows, tiny_config
 from .test_shard import run_all
@@ -129,6 +131,11 @@ def test_shard_metadata_progress_and_every_shard_schema(tmp_path, mesh_source, c
     meta = dict(t.schema.metadata)
     meta[b"datagen.schema_version"] = b"99"
     pq.write_table(t.replace_schema_metadata(meta), job.shard_path(1))
+    with pytest.raises(ShardError, match=r"part-00001.parquet: (truncated|changed size): .* bytes, the ledger "):
+        open_dataset(job.path)  # a file the ledger does not vouch for
+    entry = json.loads(job.ledger_path(1).read_text())
+    entry["files"]["shards/part-00001.parquet"] = integrity.file_record(job.shard_path(1))
+    job.record_finished(1, entry)  # as if another code version had written it
     with pytest.raises(SchemaError, match="part-00001"):
         open_dataset(job.path)
     # `datagen eval` of a grasps table writes an `evaluated` table
@@ -207,7 +214,7 @@ def test_an_unpicklable_shard_error_keeps_its_cause(tmp_path, mesh_source, monke
 
 
 def test_a_ray_task_error_becomes_one_clean_line():
-    from workers.run import error_line
+    from workers.cluster import error_line
 
     class FakeRayTaskError(Exception):  # what ray.get raises: a traceback with colours, and the cause
         def __init__(self, cause):

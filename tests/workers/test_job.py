@@ -9,7 +9,8 @@ import pytest
 import heapq
 
 from workers.job import AUTO, SINGLE_OBJECT_COST, JobConfig, JobDir, JobError, shard_size, shard_slices
-from workers.run import _resolve_layout, worker_slots
+from workers.cluster import worker_slots
+from workers.run import _resolve_layout
 
 from .conftest import tiny_config
 

@@ -3,6 +3,8 @@ writes, the per-object time limit, determinism."""
 
 from __future__ import annotations
 
+import json
+
 import os
 from pathlib import Path
 
@@ -12,7 +14,8 @@ import pytest
 import workers.shard as shard_mod
 from schemas import arrow_schema, check_version
 from workers.job import JobConfig, JobDir, shard_slices
-from workers.run import merge_failures, prepare_manifest
+from workers.finished import merge_failures
+from workers.setup import prepare_manifest
 from workers.shard import run_shard
 
 from .conftest import comparable_rows, tiny_config
@@ -72,15 +75,20 @@ def test_same_config_same_rows(tmp_path, mesh_source, cache_dir, done_job):
 
 
 def test_failing_shard_write_leaves_no_partial_file(tmp_path, mesh_source, cache_dir, monkeypatch):
+    from workers.job import JobIOError
+
     real = shard_mod.pq.write_table
+    cfg = tiny_config(mesh_source)
+    run_all(tmp_path / "job", cfg, cache_dir, only=set())  # the job and its manifest, no shard yet
 
     def broken(table, where, **kw):
         real(table.slice(0, 1), where, **kw)  # something reaches the disk, then the write fails
-        raise OSError("disk full (simulated)")
+        raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(shard_mod.pq, "write_table", broken)
-    with pytest.raises(OSError, match="disk full"):
-        run_all(tmp_path / "job", tiny_config(mesh_source), cache_dir, only={0})
+    with pytest.raises(JobIOError, match=r"cannot write the Parquet file .*shards/part-00000.parquet: No space left "
+                                         r"on device \(free space on the file system holding .*shards"):
+        run_all(tmp_path / "job", cfg, cache_dir, only={0})
     job = JobDir(tmp_path / "job")
     assert not job.shard_path(0).exists()
     assert list((job.path / "shards").iterdir()) == []  # no temp file left either
@@ -111,6 +119,12 @@ def test_status_and_report(done_job, capsys):
     assert f"grasps   {len(rows)}" in capsys.readouterr().out
     card = write_report(done_job.path, renders=1).read_text()
     assert "# Dataset card" in card and f"| process | {reason} | 1 |" in card
+    # the hand gains the verdicts follow: in job.json, each shard's eval config and the card
+    assert json.loads((done_job.path / "job.json").read_text())["eval_protocol"] == "dexgraspbench"
+    shard = next(done_job.shard_path(i) for i in range(3) if done_job.shard_path(i).is_file())
+    meta = pq.read_schema(shard).metadata
+    assert json.loads(meta[b"datagen.eval_config"])["protocol"] == "dexgraspbench"
+    assert "- hand gains: protocol `dexgraspbench`" in card
     pics = sorted((done_job.path / "renders").glob("*.png")) if (done_job.path / "renders").is_dir() else []
     if pics:  # an offscreen GL context was available
         assert f"![renders/{pics[0].name}]" in card
