@@ -18,7 +18,7 @@ from .coacd_step import ConvexPiece
 from .config import ProcessConfig
 from .errors import MeshProcessingError, Reason
 
-__all__ = ["pieces_union", "watertight_surface"]
+__all__ = ["watertight_surface"]
 
 
 def _as_manifold(vertices: np.ndarray, faces: np.ndarray) -> mf.Manifold | None:
@@ -39,37 +39,19 @@ def watertight_surface(mesh: trimesh.Trimesh, pieces: list[ConvexPiece], cfg: Pr
             solid = parts[0] if len(parts) == 1 else mf.Manifold.batch_boolean(parts, mf.OpType.Add)
     if solid is None:
         origin = "pieces_union"
-        solid = _union([p.vertices for p in pieces])
-    v, f = _simplified(solid, cfg.surface_tolerance, cfg.surface_max_faces)
+        hulls = [mf.Manifold.hull_points(np.asarray(p.vertices, np.float64)) for p in pieces]
+        solid = mf.Manifold.batch_boolean(hulls, mf.OpType.Add)
+    tol = cfg.surface_tolerance
+    for _ in range(12):
+        simple = solid.simplify(tol)
+        if simple.num_tri() <= cfg.surface_max_faces:
+            break
+        tol *= 2.0
+    out = simple.to_mesh()
+    v = np.asarray(out.vert_properties, np.float64)[:, :3]
+    f = np.asarray(out.tri_verts, np.int64)
     check = trimesh.Trimesh(v, f, process=False)
     if len(f) == 0 or not check.is_watertight or check.volume <= 0:
         raise MeshProcessingError(Reason.SURFACE_FAILED, thing,
                                   f"simplified surface ({origin}) is empty or not watertight")
     return v, f, origin
-
-
-def _union(vertex_sets) -> mf.Manifold:
-    hulls = [mf.Manifold.hull_points(np.asarray(v, np.float64)) for v in vertex_sets]
-    return mf.Manifold.batch_boolean(hulls, mf.OpType.Add)
-
-
-def pieces_union(vertex_sets, tolerance: float, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(vertices (n, 3), faces (f, 3))``: the surface of the union of the convex hulls of
-    ``vertex_sets`` (each ``(k, 3)``, normalized units), simplified within ``tolerance`` (doubled
-    until it has at most ``max_faces`` faces): the solid MuJoCo simulates (its collision geometry
-    is each piece's convex hull). Raises ValueError when it is empty."""
-    v, f = _simplified(_union(vertex_sets), tolerance, max_faces)
-    if len(f) == 0:
-        raise ValueError("the union of the convex pieces is empty")
-    return v, f
-
-
-def _simplified(solid: mf.Manifold, tolerance: float, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    tol = tolerance
-    for _ in range(12):
-        simple = solid.simplify(tol)
-        if simple.num_tri() <= max_faces:
-            break
-        tol *= 2.0
-    out = simple.to_mesh()
-    return np.asarray(out.vert_properties, np.float64)[:, :3], np.asarray(out.tri_verts, np.int64)

@@ -309,10 +309,6 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
     idx = b.object_index
     with torch.no_grad():
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
-        import os
-        if os.environ.get("XSQ") and b.links is None:  # EXPERIMENT
-            from datagen.synth.links import contact_links
-            b = dataclasses.replace(b, links=torch.tensor(contact_links(hand, b.finger_index)), palm=True)
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
                                   link_pull=b.link_pull, palm_contact=b.palm)

@@ -65,31 +65,15 @@ class GraspTarget:
                    object_path=object_path, mesh_sha256=mesh_sha256, grid=grid)
 
     @classmethod
-    def from_processed(cls, processed, scale: float, *, cache_grid: bool = True, surface: str = "pieces",
-                       **kw) -> "GraspTarget":
-        """From a :class:`datagen.objects.process.ProcessedObject`: ``surface="pieces"`` (default)
-        the union of its convex pieces, the solid the MuJoCo tests simulate
-        (`datagen.objects.surface.pieces_union`); ``"mesh"`` its simplified watertight surface
-        (the object's own shape: where CoACD's decimated pieces differ from it, by 3 mm median on a
-        14 cm ball, a grasp synthesized on it is that far off the simulated object).
+    def from_processed(cls, processed, scale: float, *, cache_grid: bool = True, **kw) -> "GraspTarget":
+        """From a :class:`datagen.objects.process.ProcessedObject` (its watertight surface).
 
         The SDF grid comes from the grid cache (built and stored on a miss) unless
         ``cache_grid=False``; ``cache=`` names the objects cache root (default ``$DATAGEN_CACHE``).
         """
         if not processed.ok:
             raise ValueError(f"{processed.object_id}: object failed processing ({processed.reason}): {processed.message}")
-        if surface == "pieces":
-            from datagen.objects.config import ProcessConfig
-            from datagen.objects.surface import pieces_union
-
-            d = ProcessConfig()
-            v, f = pieces_union([np.asarray(trimesh.load(Path(p), force="mesh", process=False).vertices)
-                                 for p in processed.piece_paths], d.surface_tolerance, d.surface_max_faces)
-            mesh = trimesh.Trimesh(v, f, process=False)
-        elif surface == "mesh":
-            mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
-        else:
-            raise ValueError(f"GraspTarget.from_processed: surface must be 'pieces' or 'mesh', got {surface!r}")
+        mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
         return cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
                              mesh_sha256=processed.mesh_sha256, cache_grid=cache_grid, **kw)
 
