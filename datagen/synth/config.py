@@ -66,7 +66,7 @@ class SynthConfig(Config):
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)
     task: str = ""  #: the task whose ``synth:`` block this config holds (set by the resolver; "" none)
-    grasp_type: str = "precision"  #: the grasp type (datagen/tasks/grasp_types) whose contact set and ``synth:`` block this config holds (set by the resolver)
+    grasp_type: str = "precision"  #: the grasp type (name or YAML, datagen/tasks/grasp_types) of the batch's contact set (set per batch from the recipe's grasp_types)
 
     def for_hand(self, hand) -> "SynthConfig":
         """This config with the hand's own values where it leaves them open (``sphere_margin_m``:

@@ -207,16 +207,17 @@ class _Batch:
 
 
 def _grasp_links(hand, grasp_type, finger_index) -> tuple[bool, torch.Tensor | None, torch.Tensor | None]:
-    """``(palm, links (L,), pull (palm + L,) bool)`` of a grasp type's extra contact roles: the palm
-    centre, the phalanges and which of them the distance term pulls (False, None, None: none)."""
+    """``(palm centre, links (L,), pull (L,) bool)`` of a grasp type's extra contact roles: the palm
+    link and the phalanges, each at its nearest collision sphere, and which of them the distance
+    term pulls (False, None, None: none)."""
     from datagen.synth.links import contact_links
 
     palm, phal = grasp_type.role("palm"), grasp_type.role("phalanges")
-    links = contact_links(hand, finger_index) if phal is not None else []
-    pull = ([palm == "pull"] if palm is not None else []) + [phal == "pull"] * len(links)
+    links = ([hand.palm_link] if palm is not None else []) + (contact_links(hand, finger_index) if phal is not None else [])
+    pull = ([palm == "pull"] if palm is not None else []) + [phal == "pull"] * (len(links) - (palm is not None))
     if not pull:
         return False, None, None
-    return (palm is not None, torch.tensor(links, dtype=torch.long, device=hand.device),
+    return (False, torch.tensor(links, dtype=torch.long, device=hand.device),
             torch.tensor(pull, dtype=torch.bool, device=hand.device))
 
 

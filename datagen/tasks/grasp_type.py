@@ -8,14 +8,14 @@ links beyond the fingertips that take part in the grasp, by role, so one file se
   the surface by the distance term, like a fingertip, and counted in the grasp wrench space while
   touching) or ``candidate`` (counted in the GWS while touching, not pulled);
 
-plus ``init`` (`datagen.tasks.InitConfig` fields over the task's: a palm distance, a pre-curl)
-and ``synth`` (`SynthConfig` settings: a layer of the recipe, over the task's ``synth:`` block
-and under the user's settings, `datagen.pipeline.resolve`). ``precision`` is the fingertip grasp
-of the paper (no extra contacts); ``power`` adds the palm and the phalanges.
+plus ``init`` (`datagen.tasks.InitConfig` fields over the task's: a palm distance, closing the
+fingers onto the object). ``precision`` is the fingertip grasp of the paper (no extra contacts);
+``power`` adds the palm and the phalanges.
 
-Which type a grasp gets is the recipe's `GraspMix` (per object size, a share of each type);
-every row records its ``grasp_type``. A task that names its own fingertips (the paper's Table II
-tasks) is its own contact set: its rows record ``task``.
+Which type a grasp gets is the recipe's ``grasp_types`` (a `GraspMix`: per object size, a share
+of each type; `datagen.pipeline.resolve`), for force-closure tasks on every fingertip; every row
+records its ``grasp_type``. A task that names its own fingertips (the paper's Table II tasks) is
+its own contact set: its rows record ``task``.
 """
 
 from __future__ import annotations
@@ -39,15 +39,13 @@ TASK_GRASP_TYPE = "task"  #: the grasp_type of rows of a task that names its own
 
 @dataclass(frozen=True)
 class GraspType(Config):
-    """One grasp type: its extra contact links by role, its initial pose and synthesis settings."""
+    """One grasp type: its extra contact links by role and its initial-pose fields."""
 
     name: str
     #: role ("palm", "phalanges") -> "pull" or "candidate"; the fingertips are always contacts
     contacts: Mapping[str, str] = field(default_factory=dict)
-    #: `InitConfig` fields replacing the task's (e.g. ``distance_m``, ``curl``)
+    #: `InitConfig` fields replacing the task's (e.g. ``distance_m``, ``close``)
     init: Mapping[str, Any] = field(default_factory=dict)
-    #: `SynthConfig` settings: a layer of the recipe over the task's ``synth:`` block
-    synth: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         from datagen.tasks.spec import InitConfig
@@ -66,8 +64,6 @@ class GraspType(Config):
         if unknown:
             raise ConfigError(f"grasp type {self.name!r}: unknown init field(s) {unknown}",
                               f"known: {sorted(InitConfig.__dataclass_fields__)}")
-        if "grasp_type" in self.synth:
-            raise ConfigError(f"grasp type {self.name!r}: synth.grasp_type is set by the resolver")
 
     def role(self, name: str) -> str | None:
         """``"pull"``, ``"candidate"`` or None (the role takes no part)."""
@@ -86,7 +82,8 @@ class GraspType(Config):
 
 @dataclass(frozen=True)
 class GraspBand(Config):
-    """The grasp types of objects up to one size: ``mix`` maps type names to shares (summing to 1)."""
+    """The grasp types of objects up to one size: ``mix`` maps type names (or YAML paths) to
+    shares (summing to 1)."""
 
     max_scale_m: float | None = None  #: objects of at most this scale (m); None: every larger one
     mix: Mapping[str, float] = field(default_factory=lambda: {"precision": 1.0})  #: type name -> share of the grasps
@@ -117,6 +114,11 @@ class GraspMix(Config):
         for b in self.bands:
             for name in b.mix:
                 load_grasp_type(name)  # an unknown type is refused here, naming it
+
+    @classmethod
+    def single(cls, name: str) -> "GraspMix":
+        """Every grasp of one type."""
+        return cls(bands=(GraspBand(mix={name: 1.0}),))
 
     def types(self) -> list[str]:
         """Every grasp type the bands use (share > 0), in order of first use."""
