@@ -118,7 +118,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None, palm_contact: bool = False) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -127,9 +127,9 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0;
     ``self_pairs`` reuses its pair lists across calls on the same batch (an optimizer run);
     ``scenery``: static boxes the spheres must also stay out of (penetration terms);
-    ``palm_contact`` and ``links`` ``(L,)``: a grasp type's extra contacts, the palm centre and
-    phalanges at their nearest points (`datagen.synth.links.link_contacts`); ``link_pull``
-    ``(1 + L,)`` or ``(L,)`` bool: those the distance term pulls.
+    ``links`` ``(L,)``: a grasp type's extra contact links, the palm and phalanges, at their
+    nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
+    distance term pulls.
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -152,8 +152,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                           if self_collision
                           else centres_all.new_zeros(centres_all.shape[0])),
         joint_violation=violation,
-        links=(link_contacts(hand, targets, object_index, centres, radii, links, T=T, palm=palm_contact,
-                             margin_m=sphere_margin) if palm_contact or (links is not None and links.numel()) else None),
+        links=(link_contacts(hand, targets, object_index, centres, radii, links)
+               if links is not None and links.numel() else None),
         link_pull=link_pull,
     )
 

@@ -202,22 +202,22 @@ class _Batch:
     joints: torch.Tensor  # (B S, J) initial joints, coupled
     directions: torch.Tensor  # (K, 6) wrench directions
     links: torch.Tensor | None = None  # (L,) the grasp type's extra contact links (palm, phalanges); None: fingertips only
-    link_pull: torch.Tensor | None = None  # (palm + L,) bool: those the distance term pulls onto the surface
-    palm: bool = False  # the palm centre is one of the grasp type's contacts
+    link_pull: torch.Tensor | None = None  # (L,) bool: those the distance term pulls onto the surface
 
 
-def _grasp_links(hand, grasp_type, finger_index) -> tuple[bool, torch.Tensor | None, torch.Tensor | None]:
-    """``(palm centre, links (L,), pull (L,) bool)`` of a grasp type's extra contact roles: the palm
-    link and the phalanges, each at its nearest collision sphere, and which of them the distance
-    term pulls (False, None, None: none)."""
+def _grasp_links(hand, grasp_type, finger_index) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """``(links (L,), pull (L,) bool)`` of a grasp type's extra contact roles: the palm link and
+    the phalanges (each taking part at its nearest collision sphere), and which of them the
+    distance term pulls (None, None: the fingertips only)."""
     from datagen.synth.links import contact_links
 
     palm, phal = grasp_type.role("palm"), grasp_type.role("phalanges")
-    links = ([hand.palm_link] if palm is not None else []) + (contact_links(hand, finger_index) if phal is not None else [])
-    pull = ([palm == "pull"] if palm is not None else []) + [phal == "pull"] * (len(links) - (palm is not None))
-    if not pull:
-        return False, None, None
-    return (False, torch.tensor(links, dtype=torch.long, device=hand.device),
+    phalanges = contact_links(hand, finger_index) if phal is not None else []
+    links = ([hand.palm_link] if palm is not None else []) + phalanges
+    pull = ([palm == "pull"] if palm is not None else []) + [phal == "pull"] * len(phalanges)
+    if not links:
+        return None, None
+    return (torch.tensor(links, dtype=torch.long, device=hand.device),
             torch.tensor(pull, dtype=torch.bool, device=hand.device))
 
 
@@ -228,7 +228,7 @@ def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, 
     dev, dt = hand.device, hand.dtype
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)
     finger_index = _resolve_fingers(hand, task)
-    palm, links, pull = _grasp_links(hand, grasp_type, finger_index) if grasp_type is not None else (False, None, None)
+    links, pull = _grasp_links(hand, grasp_type, finger_index) if grasp_type is not None else (None, None)
     if grasp_type is not None:
         task = dataclasses.replace(task, init=grasp_type.apply_init(task.init))
     seed_index = object_index.repeat_interleave(cfg.seeds_per_grasp)  # seeds of grasp b: rows b S .. b S + S - 1
@@ -236,7 +236,7 @@ def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, 
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
     return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,
-                  root, hand.apply_couplings(joints), directions, links, pull, palm)
+                  root, hand.apply_couplings(joints), directions, links, pull)
 
 
 def _energy_on(hand, targets, task, cfg, b: _Batch):
@@ -252,7 +252,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, palm_contact=b.palm)
+                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull)
             terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
@@ -289,16 +289,13 @@ def _optimize(hand, targets, task, cfg, b: _Batch, callback, threads: int):
 
 
 def _squeeze_extra(hand, state, cfg):
-    """A grasp type's extra contacts for the squeeze (`force_squeeze`'s ``extra``): the palm
-    centre and the phalanges, touching within ``cfg.seed_contact_gap_m`` of the surface (the
-    sphere margin added back); None for the fingertips alone."""
+    """A grasp type's extra contacts for the squeeze (`force_squeeze`'s ``extra``): the palm and
+    the phalanges, touching within ``cfg.seed_contact_gap_m`` of the surface (the sphere margin
+    added back); None for the fingertips alone."""
     lc = state.links
     if lc is None:
         return None
-    B = lc.gap.shape[0]
-    links = hand.sphere_link_index[lc.sphere]  # (B, L')
-    if lc.palm:
-        links = torch.cat([torch.full((B, 1), hand.palm_link, dtype=links.dtype, device=links.device), links], 1)
+    links = hand.sphere_link_index[lc.sphere]  # (B, L)
     touching = lc.gap + cfg.sphere_margin_m <= cfg.seed_contact_gap_m
     return lc.points, lc.normals, links, touching
 
@@ -312,7 +309,7 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
-                                  link_pull=b.link_pull, palm_contact=b.palm)
+                                  link_pull=b.link_pull)
         pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
                                     cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
                                     finger_joint_mask(hand), mount=_mount(task, targets, idx),
