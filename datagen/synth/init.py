@@ -139,7 +139,7 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
     least deep of its draws is kept)."""
     root, joints = _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery)
     if scenery is None:
-        return root, _closed(hand, targets, object_index, init_cfg, root, joints)
+        return root, joints
 
     def depth(r, j):
         centres, radii = hand.spheres(r, j)
@@ -154,16 +154,7 @@ def initial_poses(hand, targets, object_index: torch.Tensor, init_cfg, generator
         better = d2 < d
         root, joints = torch.where(better[:, None], r2, root), torch.where(better[:, None], j2, joints)
         d = torch.minimum(d, d2)
-    return root, _closed(hand, targets, object_index, init_cfg, root, joints)
-
-
-def _closed(hand, targets, object_index, init_cfg, root, joints):
-    """``init.close``: the fingers closed until they touch (`datagen.synth.closing`)."""
-    if not init_cfg.close:
-        return joints
-    from datagen.synth.closing import close_until_contact
-
-    return close_until_contact(hand, targets, object_index, root, joints, margin_m=float(hand.sphere_margin_m))
+    return root, joints
 
 
 def _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery):

@@ -47,7 +47,6 @@ class InitConfig(Config):
     target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm (or the fingertips, see aim) aims at, m
     curl: float = 0.0  #: fingers start this fraction (0..1) of the way from open to flexed (a hook)
     aim: str = "palm"  #: "approach": what lands on target_m, "palm" (palm origin) or "fingertips" (task tips' centre)
-    close: bool = False  #: close each finger joint by joint from the start pose until it touches the object (a power grasp's pre-shape)
 
     def __post_init__(self):
         if self.kind not in ("surround", "above", "approach"):
