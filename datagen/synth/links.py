@@ -13,10 +13,9 @@ one with the smallest gap to the object (sphere centre's signed distance minus i
 nearest surface point and inward normal, as the whole-hand epsilon of the seed choice reads them
 (`datagen.synth.select.link_contacts`). The choice of sphere is discrete (made without gradient);
 the gap, point and normal of the chosen sphere are differentiable in the pose like a fingertip's.
-(The palm frame's origin would be a poor palm contact: it lies 2-3 mm behind the palm's collision
-spheres on Shadow and Allegro, so pulling it onto the object fights the penetration term; pulled,
-it stayed ~10 mm off the object in MuJoCo, and the power grasps held 42% / 33% at 0.10 / 0.12 m
-against 69% / 44% with the nearest sphere, benchmarks/results/quality.md.)
+(The palm frame's origin was tried as the palm's contact: pulled onto the object it brought the
+palm within 1 mm of it in MuJoCo (median; the nearest sphere: 5 mm), but the grasps held less:
+42% / 33% at 0.10 / 0.12 m on the Shadow hand against 69% / 44%, benchmarks/results/quality.md.)
 """
 
 from __future__ import annotations
