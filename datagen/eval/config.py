@@ -51,18 +51,18 @@ class EvalConfig(Config):
     config_error: ClassVar[type[EvalError]] = EvalError
 
     # --- physics (MuJoCo options; gravity off) ---
-    timestep_s: float = 0.004
-    integrator: str = "implicitfast"
-    cone: str = "elliptic"
-    impratio: float = 10.0
-    noslip_iterations: int = 2
-    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    timestep_s: float = 0.004                        # MuJoCo timestep, s (DexGraspBench's)
+    integrator: str = "implicitfast"                 # MuJoCo integrator: "euler", "rk4", "implicit" or "implicitfast"
+    cone: str = "elliptic"                           # friction cone: "elliptic" or "pyramidal"
+    impratio: float = 10.0                           # frictional-to-normal constraint impedance ratio (>= 1)
+    noslip_iterations: int = 2                       # MuJoCo's no-slip solver passes per step (0 off)
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2: off, the hold test applies its own forces
     # --- contacts: set on every geom of the scene (hand and object) ---
-    condim: int = 4
+    condim: int = 4                                  # contact dimensionality: 1, 3, 4 (with torsional friction) or 6
     friction: tuple[float, float] = (0.6, 0.02)   # sliding, torsional (rolling stays 1e-4)
     geom_margin_m: float = 0.0                     # the hand MJCFs' own margins are overridden
-    hand_solimp: tuple[float, float, float] = (0.5, 0.99, 1e-4)
-    hand_solref: tuple[float, float] = (0.005, 1.0)
+    hand_solimp: tuple[float, float, float] = (0.5, 0.99, 1e-4)  # solimp of the hand's geoms (MuJoCo's width/impedance)
+    hand_solref: tuple[float, float] = (0.005, 1.0)  # solref of the hand's geoms: time constant s, damping ratio
     # --- hand control ---
     # Whose gains the hand's position actuators get (datagen/eval/protocol.py): "dexgraspbench",
     # DexGraspBench's own hand files for LEAP (Menagerie's kp 3, kv 0.01, no force limit), Allegro
@@ -90,13 +90,13 @@ class EvalConfig(Config):
     object_mass_kg: float = 0.1                    # split over the pieces by volume
     # --- grasp execution: pregrasp -> grasp -> squeeze ---
     waypoints: int = 10                            # per phase (0.4 s each at the defaults)
-    steps_per_waypoint: int = 10
+    steps_per_waypoint: int = 10                     # MuJoCo steps per waypoint (0.04 s at the default timestep)
     # --- hold test ---
     force_per_kg: float = 10.0                     # force = 10 * mass (1 N for 0.1 kg)
     hold_steps: int = 500                          # 2.0 s
     check_every: int = 50                          # steps between pose checks
-    max_translation_m: float = 0.05
-    max_rotation_deg: float = 15.0
+    max_translation_m: float = 0.05                  # object travel that fails a direction, m
+    max_rotation_deg: float = 15.0                   # object rotation that fails a direction, deg
     stop_at_first_failure: bool = True             # stop every direction at the first failing check
     # Early pass: a direction passes at a check once, at settle_checks consecutive checks, the
     # object's creep since the previous check, kept up settle_safety times over for every check
@@ -109,7 +109,7 @@ class EvalConfig(Config):
     # 2.8 deg through the checks, then 22.7 deg); 3 checks pass none of the 600, for 46-69% of the
     # full hold's steps (2 checks: 36-60%; safety 24 instead: 40-73%).
     settle_checks: int = 3
-    settle_safety: float = 12.0
+    settle_safety: float = 12.0                      # the creep's margin per check left (above)
     threads: int = 1                               # >1: directions stepped by a thread pool
     # --- rejections before simulating and static metrics at the grasp pose ---
     max_pregrasp_penetration_m: float = 0.01       # deeper hand-object contact at the pregrasp: rejected
@@ -119,15 +119,14 @@ class EvalConfig(Config):
     # geoms by up to ~3 mm (Shadow spec: sphere_fit.overshoot 2.8 mm), so its touching fingertips
     # are 1-3 mm away from the object in MuJoCo.
     touch_distance_m: float = 0.005
-    min_touching_links: int = 2
+    min_touching_links: int = 2                      # fewer touching hand links at the grasp pose: no_contact
     contact_distance_m: float = 0.005              # hand geoms this close give the epsilon's contacts
     epsilon_mu: float | None = None                # None: friction[0]
     epsilon_samples: int = 1024                    # see datagen.wrench.EpsilonSearch
-    epsilon_iters: int = 100
+    epsilon_iters: int = 100                         # iterations of the epsilon metric's boundary search
     # --- tasks ---
-    hold_tasks: tuple[str, ...] = ("force_closure",)
-    tasks: Mapping[str, TaskTest] = field(default_factory=lambda: dict(DEFAULT_TASKS))
-
+    hold_tasks: tuple[str, ...] = ("force_closure",)  # tasks judged by the six-direction hold test
+    tasks: Mapping[str, TaskTest] = field(default_factory=lambda: dict(DEFAULT_TASKS))  # name -> MuJoCo test
     def __post_init__(self) -> None:
         c = "EvalConfig"
         _check(self.timestep_s > 0, f"{c}.timestep_s", "must be > 0")

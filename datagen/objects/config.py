@@ -43,12 +43,12 @@ class ProcessConfig(Config):
     min_volume_fraction: float = 1e-6    # hull volume / bbox-diagonal^3 below this: degenerate
     # --- CoACD (normalized units); the seed is fixed so pieces are reproducible ---
     coacd_threshold: float = 0.05        # concavity threshold
-    coacd_seed: int = 0
-    coacd_preprocess_resolution: int = 50
-    coacd_resolution: int = 2000
-    coacd_mcts_nodes: int = 20
-    coacd_mcts_iterations: int = 150
-    coacd_mcts_max_depth: int = 3
+    coacd_seed: int = 0                              # CoACD's random seed (fixed: reproducible pieces)
+    coacd_preprocess_resolution: int = 50            # CoACD manifold preprocessing voxel resolution
+    coacd_resolution: int = 2000                     # CoACD's sampling resolution of the Hausdorff distance
+    coacd_mcts_nodes: int = 20                       # CoACD's Monte Carlo tree search: nodes
+    coacd_mcts_iterations: int = 150                 # CoACD's Monte Carlo tree search: iterations
+    coacd_mcts_max_depth: int = 3                    # CoACD's Monte Carlo tree search: depth
     coacd_max_convex_hull: int = -1      # -1: no limit
     coacd_max_ch_vertex: int = 64        # pieces are decimated to at most this many vertices
     min_part_volume: float = 1e-10       # parts at or below this volume are dropped
@@ -57,8 +57,8 @@ class ProcessConfig(Config):
     surface_max_faces: int = 6000        # tolerance is doubled until the surface fits
     # --- MuJoCo model ---
     total_mass_kg: float = 0.1           # split over pieces in proportion to their volume
-    geom_condim: int = 4
-    geom_friction: tuple[float, float, float] = (0.6, 0.02, 0.0001)
+    geom_condim: int = 4                             # contact dimensionality of the object's geoms
+    geom_friction: tuple[float, float, float] = (0.6, 0.02, 0.0001)  # sliding, torsional, rolling
     mjcf_check_scale: float = 0.06       # the model is compiled by MuJoCo at this scale (m)
 
     def __post_init__(self):

@@ -9,9 +9,18 @@ preset -> task YAML -> the user's config -> flags); `synthesize` is the five-lin
 `datagen.eval` and `datagen.tasks`, below the command line and the workers.
 """
 
-from .api import load_object, synthesize
-from .batch import BatchObject, BatchResult, build_targets, evaluate_rows, failure, run_batch, synthesize_rows
-from .recipe import DEFAULT_PRESET, PRESETS, Recipe, resolve
+from importlib import import_module
 
-__all__ = ["BatchObject", "BatchResult", "DEFAULT_PRESET", "PRESETS", "Recipe", "build_targets", "evaluate_rows",
-           "failure", "load_object", "resolve", "run_batch", "synthesize", "synthesize_rows"]
+_EXPORTS = {"load_object": "api", "synthesize": "api", "DEFAULT_PRESET": "recipe", "PRESETS": "recipe",
+            "Recipe": "recipe", "resolve": "recipe", **{name: "batch" for name in (
+                "BatchObject", "BatchResult", "build_targets", "evaluate_rows", "failure", "run_batch",
+                "synthesize_rows")}}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    """The package's names, imported on first use: the command registrars in `commands` (imported
+    by the command line before a path is checked) pull in no torch, pyarrow or MuJoCo."""
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(import_module(f".{_EXPORTS[name]}", __name__), name)

@@ -9,8 +9,7 @@ batched over all of them; only the distance queries loop over the distinct objec
 Outputs per grasp (:class:`SynthesisResult`, all in each object's frame, metres/radians):
 ``grasp`` = ``[x y z qw qx qy qz, joints...]`` (the hand MJCF's joint order); ``squeeze`` the
 same root with finger joints set so that position actuators press the task fingertips onto the
-object with balanced grip forces, and ``pregrasp`` = ``2 grasp - squeeze`` (by default; see
-``cfg.squeeze_mode`` and :mod:`datagen.synth.squeeze`), pulled back towards the grasp where it
+object with balanced grip forces, and ``pregrasp`` = ``2 grasp - squeeze`` (:mod:`datagen.synth.squeeze`), pulled back towards the grasp where it
 would sink the hand deeper into the object than the grasp does;
 the task fingertips' contact points and inward normals; final energy terms; epsilon of those
 contacts; the initial pose (for rendering). A mounted task object's scenery (door, panel, housing,

@@ -20,6 +20,7 @@ from datagen.errors import ConfigError
 from datagen.pipeline import PRESETS, resolve
 from datagen.synth import SynthConfig
 from datagen.tasks import load_task
+from datagen.tasks.spec import builtin_tasks
 
 
 def test_layers_stack_in_order_and_a_set_key_wins_even_at_its_default():
@@ -36,6 +37,18 @@ def test_layers_stack_in_order_and_a_set_key_wins_even_at_its_default():
     # flags over the config, the config over the preset
     both = resolve("shadow", "force_closure", config={"synth": {"iters": 40, "seed": 2}}, flags={"synth": {"iters": 7}})
     assert (both.synth.iters, both.synth.seed, both.synth.seeds_per_grasp) == (7, 2, 16)
+
+
+@pytest.mark.parametrize("task", builtin_tasks())
+def test_one_seed_and_a_tasks_option_set_back_to_the_default_are_honoured_on_every_task(task):
+    """``--seeds 1`` (a flag) and a config that puts each of the task's synthesis settings back to
+    SynthConfig's own default win over the task's block, on every built-in task."""
+    assert resolve("shadow", task, flags={"synth": {"seeds_per_grasp": 1}}).synth.seeds_per_grasp == 1
+    block = {k: v for k, v in load_task(task).synth.items() if k in SynthConfig.__dataclass_fields__
+             and not isinstance(v, dict)}
+    default = SynthConfig()
+    back = resolve("shadow", task, config={"synth": {k: getattr(default, k) for k in block}}).synth
+    assert all(getattr(back, k) == getattr(default, k) for k in block), block
 
 
 def test_nested_mappings_merge_key_by_key_and_presets_differ_only_where_they_say():
