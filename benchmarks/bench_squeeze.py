@@ -71,7 +71,7 @@ def main() -> None:
     pieces = [pieces_from_processed(p, scale) for p in procs]
     cfg = SynthConfig(iters=args.iters, seed=0)
     t0 = time.perf_counter()
-    res, _ = synthesize_rows(hand, targets, load_task("force_closure"), cfg, args.grasps)
+    (res,), _ = synthesize_rows(hand, targets, load_task("force_closure"), cfg, args.grasps)
     t_synth = time.perf_counter() - t0
 
     grasp_j, root = res.grasp[:, 7:], res.grasp[:, :7]

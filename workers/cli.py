@@ -95,6 +95,8 @@ def _config(args):
     flags = recipe_flags(args)
     if "preset" in flags:
         data["preset"] = flags["preset"]
+    if "grasp_types" in flags:
+        data["grasp_types"] = flags["grasp_types"]
     if "synth" in flags:
         if data.get("synth") is not None and not isinstance(data["synth"], dict):
             raise JobError(f"{args.config}: synth must be a mapping of SynthConfig fields")

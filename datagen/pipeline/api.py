@@ -56,7 +56,7 @@ def synthesize(hand: str = "shadow", obj: str | Path = "", task: str | Path = "f
     the synthesized ``grasps`` rows. ``hand``, ``task``: built-in names or YAML paths; ``scales``:
     metres per normalized object unit; ``seed`` (None: the recipe's, 0); ``preset``/``config``:
     see `datagen.pipeline.resolve` (``config`` a mapping of ``synth``/``eval``/``process``/
-    ``grid_resolution`` settings); ``cache``: the objects cache root (default $DATAGEN_CACHE).
+    ``grasp_types``/``grid_resolution`` settings); ``cache``: the objects cache root (default $DATAGEN_CACHE).
     Failures of the object's target, synthesis or evaluation raise ValueError naming them."""
     from datagen.hands import load_hand
 
@@ -69,7 +69,7 @@ def synthesize(hand: str = "shadow", obj: str | Path = "", task: str | Path = "f
     objects = [BatchObject(load_object(obj, recipe.process, cache), tuple(scales))]
     if not evaluate:
         targets = build_targets(objects, grid_resolution=recipe.grid_resolution, cache=cache, device=device)
-        return synthesize_rows(model, targets, recipe.load_task(), recipe.synth, n)[1]
+        return synthesize_rows(model, targets, recipe.load_task(), recipe.synth, n, grasp_types=recipe.grasp_types)[1]
     out = run_batch(objects, model, [recipe], grasps_per_object=n, cache=cache, device=device)
     if out.failures:
         raise ValueError("; ".join(f"{f['stage']}: {f['message']}" for f in out.failures))

@@ -13,8 +13,9 @@ synthesized rows without evaluating them) or swap one (a benchmark executing oth
    normalized units, so they are built once per object (at its first scale) and the hull samples
    are rescaled for the other scales.
 2. per recipe (one per task, `datagen.pipeline.resolve`; its objects paired by
-   `datagen.tasks.task_targets`): `synthesize_rows`, one batch for every target of the task,
-   seeded by ``seed``; rows of the ``grasps`` schema.
+   `datagen.tasks.task_targets`): `synthesize_rows`, one batch for every target of the task and
+   grasp type (the recipe's ``grasp_types`` by object size), seeded by ``seed``; rows of the
+   ``grasps`` schema.
 3. `evaluate_rows`: the MuJoCo test, per object and scale, so one bad object costs only its rows.
 
 Anything that fails for an object (its target, the batch's synthesis, its evaluation) becomes a
@@ -121,17 +122,36 @@ def build_targets(objects: Sequence[BatchObject], *, grid_resolution: int | None
     return targets
 
 
-def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, *,
+def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, *, grasp_types=None,
                     splits: Mapping[str, str] | None = None, callback=None):
-    """``(SynthesisResult, table)``: ``grasps_per_object`` grasps on every target in one batch
-    (`datagen.synth.synthesize`, seeded by ``cfg.seed``) and their rows (``grasps`` schema,
-    `datagen.synth.rows.result_table`). ``cfg`` is the task's resolved `SynthConfig`
-    (``resolve(...).synth``). ``callback(it, ...)`` is the optimizer's per-iteration hook."""
+    """``(results, table)``: ``grasps_per_object`` grasps on every target (`datagen.synth.synthesize`,
+    seeded by ``cfg.seed``) and their rows (``grasps`` schema, `datagen.synth.rows.result_table`).
+    ``cfg`` is the task's resolved `SynthConfig` (``resolve(...).synth``); ``grasp_types``: the
+    recipe's `datagen.tasks.GraspMix` (None: ``cfg.grasp_type`` for every grasp), applied to a
+    force-closure task on every fingertip: one batch per grasp type and grasp count (the targets
+    in order, so one type gives the one batch of every target), ``results`` in that order.
+    ``callback(it, ...)`` is the optimizer's per-iteration hook."""
     from datagen.synth import synthesize
     from datagen.synth.rows import result_table
 
-    result = synthesize(hand, list(targets), task, cfg, grasps_per_object, callback=callback)
-    return result, result_table(result, list(targets), hand, task, cfg, splits=splits)
+    results, tables = [], []
+    for name, count, group in _grasp_groups(task, targets, grasps_per_object, grasp_types, cfg.grasp_type):
+        c = cfg if name == cfg.grasp_type else dataclasses.replace(cfg, grasp_type=name)
+        result = synthesize(hand, group, task, c, count, callback=callback)
+        results.append(result)
+        tables.append(result_table(result, group, hand, task, c, splits=splits))
+    return results, tables[0] if len(tables) == 1 else pa.concat_tables(tables)
+
+
+def _grasp_groups(task, targets: Sequence, n: int, mix, default: str) -> list[tuple[str, int, list]]:
+    """``[(grasp type, grasps per target, targets)]``: the batches `synthesize_rows` runs."""
+    if mix is None or task.fingers != "all" or task.gamma_deg < 180:
+        return [(default, n, list(targets))]
+    groups: dict[tuple[str, int], list] = {}
+    for t in targets:
+        for name, count in mix.counts(float(t.scale), n).items():
+            groups.setdefault((name, count), []).append(t)
+    return [(name, count, group) for (name, count), group in groups.items()]
 
 
 def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, *, base: str | Path = ".",
@@ -231,7 +251,7 @@ def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps
 
         try:
             _, table = synthesize_rows(hand, targets, task, synth_cfg, grasps_per_object, splits=splits,
-                                       callback=moved)
+                                       grasp_types=recipe.grasp_types, callback=moved)
         except Exception as exc:  # noqa: BLE001 - the batch's objects fail, the other tasks go on
             for t in targets:
                 fails.append(failure(t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "

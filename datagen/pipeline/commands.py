@@ -22,6 +22,9 @@ def add_recipe_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, default=None, dest="seeds_per_grasp",
                    help="multi-start: initial poses per output grasp, the best after seed_select_iter iterations "
                         "goes on (default: the preset's, or the task's)")
+    p.add_argument("--grasp-type", default=None, dest="grasp_type",
+                   help="every force-closure grasp of this grasp type (`datagen/tasks/grasp_types`: precision, "
+                        "power; or a YAML), instead of the preset's choice by object size")
 
 
 def recipe_flags(args) -> dict:
@@ -30,6 +33,8 @@ def recipe_flags(args) -> dict:
     out = {"synth": synth} if synth else {}
     if args.preset is not None:
         out["preset"] = args.preset
+    if args.grasp_type is not None:
+        out["grasp_types"] = args.grasp_type
     return out
 
 
@@ -111,12 +116,13 @@ def _synth(args) -> int:
             print(f"\r  iter {it + 1}/{cfg.iters}  energy {e.mean():.4f}  accepted {ok.float().mean():.0%}",
                   end="", file=sys.stderr, flush=True)
 
-    result, table = synthesize_rows(hand, targets, recipe.load_task(), cfg, args.num, callback=progress)
-    usable = int(result.usable(cfg.contact_threshold_m).sum())
+    results, table = synthesize_rows(hand, targets, recipe.load_task(), cfg, args.num,
+                                     grasp_types=recipe.grasp_types, callback=progress)
+    usable = int(sum(r.usable(cfg.contact_threshold_m).sum() for r in results))
     if usable == 0:
-        e = {k: float(v.mean()) for k, v in result.energies.items()}
-        gap = float(result.tip_distance.abs().amax(-1).min()) * 1000
-        pen = float(result.max_penetration.min()) * 1000
+        e = {k: float(torch.cat([r.energies[k] for r in results]).mean()) for k in results[0].energies}
+        gap = min(float(r.tip_distance.abs().amax(-1).min()) for r in results) * 1000
+        pen = min(float(r.max_penetration.min()) for r in results) * 1000
         print(f"datagen synth: error: no usable grasp among {table.num_rows} on {args.object} "
               f"(best contact gap {gap:.1f} mm > {cfg.contact_threshold_m * 1000:.1f} mm or penetration "
               f"{pen:.1f} mm > 5 mm); mean energies {e}. Nothing written to {args.out}.", file=sys.stderr)
@@ -126,7 +132,7 @@ def _synth(args) -> int:
     with atomic_path(args.out) as tmp:
         pq.write_table(table, tmp)
     print(f"\nwrote {args.out}: {table.num_rows} grasps, {usable} usable "
-          f"({result.timings['optimize_s']:.1f} s optimizing on {device})")
+          f"({sum(r.timings['optimize_s'] for r in results):.1f} s optimizing on {device})")
     return 0
 
 

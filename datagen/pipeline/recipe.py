@@ -3,7 +3,7 @@
 Every entry point -- the library call (`datagen.synthesize`), ``datagen synth``, ``datagen
 run`` and its shards, the benchmarks -- gets its settings from `resolve`, which stacks these
 layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``process``,
-``grid_resolution``), in this order::
+``grasp_types``, ``grid_resolution``), in this order::
 
     library defaults   the config dataclasses' own (SynthConfig, EvalConfig, ProcessConfig)
     preset             PRESETS[name]: "dataset" (the default: what a job runs) or "paper"
@@ -13,7 +13,9 @@ layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``pro
 
 A key a layer lacks is unset, and the layer below decides; a key a layer sets wins, even when
 it equals a default (``--seeds 1`` is one seed on every task). Nested mappings (``weights``,
-``contact``) merge key by key. The squeeze is computed for the evaluation's actuator stiffness of
+``contact``) merge key by key. ``grasp_types`` (a `datagen.tasks.GraspMix`: which grasp type
+each force-closure grasp gets, by object size) may also be a grasp type's name (every grasp of
+that type: ``--grasp-type power``). The squeeze is computed for the evaluation's actuator stiffness of
 the hand (`squeeze_kp`: its protocol's gains), never set on its own. The result is a frozen `Recipe`: what a job records in job.json
 and hashes, and what ``datagen synth`` writes into its table's metadata.
 """
@@ -29,11 +31,12 @@ from datagen.errors import ConfigError
 from datagen.eval.config import EvalConfig
 from datagen.objects.config import ProcessConfig
 from datagen.synth.config import SynthConfig
+from datagen.tasks.grasp_type import GraspMix
 
 __all__ = ["DEFAULT_PRESET", "PRESETS", "RECIPE_KEYS", "Recipe", "merge_layers", "resolve"]
 
 #: the parts of a configuration layer (a config file may hold other keys: a job's source, count, ...)
-RECIPE_KEYS = ("synth", "eval", "process", "grid_resolution")
+RECIPE_KEYS = ("synth", "eval", "process", "grasp_types", "grid_resolution")
 
 # A cheap CoACD setting: threshold 0.1 and preprocess resolution 30 are 2-3x faster than the
 # objects package's defaults (0.05 / 50) and give coarser but adequate pieces for the hold test
@@ -46,10 +49,18 @@ PRESETS: dict[str, dict[str, Any]] = {
     # 120 iterations) raised six-direction success on the real-object set from 38% to 73% (Shadow,
     # 8 starts) and the 0.08 m probe from 68% to 82% (16; benchmarks/results/quality.md); 300
     # iterations; a 48^3 SDF grid (~10 s per object on one core) and the fast CoACD setting.
+    # Objects of 0.09-0.13 m get power grasps (palm and phalanges in the contact set): Shadow on
+    # the real development objects 44% -> 69% at 0.10 m and 25% -> 44% at 0.12 m, held out
+    # 20% -> 50% at 0.12 m, the other hands unchanged (issue 41, benchmarks/results/quality.md).
+    # At 0.15 m power grasps held less (Shadow 11% -> 0%); the fingertip grasps at 0.06-0.08 m
+    # are unchanged.
     "dataset": {"synth": {"iters": 300, "seeds_per_grasp": 16}, "process": dict(_FAST_PROCESS),
-                "grid_resolution": 48},
+                "grid_resolution": 48,
+                "grasp_types": {"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1.0}},
+                                          {"max_scale_m": 0.13, "mix": {"power": 1.0}},
+                                          {"mix": {"precision": 1.0}}]}},
     # The paper's synthesis: one start per pose, 500 iterations (the library defaults), a 64^3
-    # grid and the objects package's CoACD defaults (threshold 0.05).
+    # grid, the objects package's CoACD defaults (threshold 0.05) and fingertip grasps only.
     "paper": {"grid_resolution": 64},
 }
 DEFAULT_PRESET = "dataset"
@@ -66,6 +77,9 @@ class Recipe(Config):
     eval: EvalConfig = field(default_factory=EvalConfig)
     process: ProcessConfig = field(default_factory=ProcessConfig)
     grid_resolution: int = 64  #: synthesis SDF grid nodes per axis (built once per object)
+    #: which grasp type (`datagen.tasks.grasp_type`) each grasp of a force-closure task on every
+    #: fingertip gets, by object size; other tasks are their own contact set (precision)
+    grasp_types: GraspMix = field(default_factory=GraspMix)
 
     def __post_init__(self):
         if self.preset not in PRESETS:
@@ -98,6 +112,14 @@ def _layer(data: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
     for k in ("synth", "eval", "process"):
         if k in data and data[k] is not None and not isinstance(data[k], Mapping):
             raise ConfigError(f"{where}: {k} must be a mapping of fields, got {type(data[k]).__name__}")
+    if "grasp_type" in (data.get("synth") or {}):
+        raise ConfigError(f"{where}: synth.grasp_type is chosen per object size by grasp_types",
+                          "set grasp_types (a grasp type's name, or bands of shares) instead")
+    if isinstance(data.get("grasp_types"), str):  # one type's name or YAML path: every grasp of it
+        data["grasp_types"] = GraspMix.single(data["grasp_types"]).to_dict()
+    elif data.get("grasp_types") is not None and not isinstance(data["grasp_types"], Mapping):
+        raise ConfigError(f"{where}: grasp_types must be a grasp type's name or a mapping with bands, "
+                          f"got {type(data['grasp_types']).__name__}")
     if "squeeze_kp" in (data.get("synth") or {}):
         raise ConfigError(f"{where}: synth.squeeze_kp is the evaluation's actuator_kp",
                           "set eval.actuator_kp instead (the squeeze is computed for it)")
@@ -135,5 +157,6 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
     synth = SynthConfig.from_dict({**merged.get("synth", {}), "task": spec.name, "squeeze_kp": squeeze_kp(hand, ev)},
                                   where=f"{where}: synth (task {spec.name!r})")
     process = ProcessConfig.from_dict(merged.get("process"), where=f"{where}: process")
+    mix = GraspMix.from_dict(merged.get("grasp_types"), where=f"{where}: grasp_types")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
-                  grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)))
+                  grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix)

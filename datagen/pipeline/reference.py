@@ -79,6 +79,7 @@ def render() -> str:
     from datagen.objects.config import ProcessConfig
     from datagen.objects.observations import ObservationConfig
     from datagen.synth.config import EnergyWeights, SynthConfig
+    from datagen.tasks.grasp_type import GraspBand, GraspMix
     from datagen.wrench.contact import ContactModel
 
     from .recipe import DEFAULT_PRESET, PRESETS
@@ -90,18 +91,26 @@ def render() -> str:
           "benchmarks) resolves one recipe per hand and task (`datagen.pipeline.resolve`) from these layers, "
           "later ones winning key by key: the library defaults below -> a preset -> the task YAML's `synth:` "
           "block -> the user's config file (`--config`) -> explicit flags (`--preset`, `--iters`, `--seeds`, "
-          "`--seed`). A key a layer does not set is left to the layer below, so a flag equal to a default "
+          "`--seed`, `--grasp-type`). A key a layer does not set is left to the layer below, so a flag equal to a default "
           "still wins over a task.", "",
-          "A config file is YAML with any of `preset`, `synth`, `eval`, `process`, `grid_resolution` (a job's "
+          "A config file is YAML with any of `preset`, `synth`, `eval`, `process`, `grasp_types`, `grid_resolution` (a job's "
           "config file adds the job's own fields, `workers/job.py` `JobConfig`):", "",
           "```yaml", "preset: dataset", "synth: {iters: 300, seeds_per_grasp: 8, weights: {distance: 2.0e4}}",
-          "eval: {settle_checks: 0}", "process: {coacd_threshold: 0.05}", "grid_resolution: 48", "```", "",
+          "eval: {settle_checks: 0}", "process: {coacd_threshold: 0.05}", "grid_resolution: 48",
+          "grasp_types: {bands: [{max_scale_m: 0.09, mix: {precision: 1}}, {mix: {power: 0.5, precision: 0.5}}]}",
+          "```", "",
           "## Presets", "", f"The default is `{DEFAULT_PRESET}`.", "", "| preset | settings over the library defaults |",
           "|---|---|"]
     md += [f"| `{k}` | `{json.dumps(v, sort_keys=True)}` |" for k, v in PRESETS.items()]
     md += ["", "## `synth`: synthesis (`SynthConfig`)", ""] + _table(SynthConfig, "")
     md += ["### `synth.contact` (`ContactModel`)", ""] + _table(ContactModel, "contact.")
     md += ["### `synth.weights` (`EnergyWeights`)", ""] + _table(EnergyWeights, "weights.")
+    md += ["## `grasp_types`: grasp types by object size (`GraspMix`)", "",
+           "Which grasp type (`datagen/tasks/grasp_types/*.yaml`, or a YAML path; docs/synthesis.md) each grasp "
+           "of a force-closure task on every fingertip gets: the first band whose `max_scale_m` holds the "
+           "object's scale applies, and its `mix` splits each object's grasps between types by share. A grasp "
+           "type's name instead of the mapping (`--grasp-type power`) gives every grasp that type.", ""]
+    md += _table(GraspMix, "") + _table(GraspBand, "bands[].")
     md += ["## `eval`: the MuJoCo tests (`EvalConfig`)", ""] + _table(EvalConfig, "")
     md += ["## `process`: object processing (`ProcessConfig`)", ""] + _table(ProcessConfig, "")
     md += ["## `observations`: what a learner sees of each object (`ObservationConfig`, a job's field)", "",

@@ -23,6 +23,7 @@ class EnergyWeights(Config):
     penetration: float = 1e5  #: per m^2 of summed squared sphere penetration (1 mm -> 0.1)
     self_penetration: float = 1e5  #: per m^2 of summed squared sphere-pair overlap
     joint_limits: float = 1e2  #: per rad of summed joint-limit violation
+    link_distance: float = 1e4  #: per m^2 of summed squared gap of a grasp type's pulled links (the palm of a power grasp)
 
     def __post_init__(self):
         for f in fields(self):
@@ -62,8 +63,10 @@ class SynthConfig(Config):
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
+    link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)
     task: str = ""  #: the task whose ``synth:`` block this config holds (set by the resolver; "" none)
+    grasp_type: str = "precision"  #: the grasp type (name or YAML, datagen/tasks/grasp_types) of the batch's contact set (set per batch from the recipe's grasp_types)
 
     def for_hand(self, hand) -> "SynthConfig":
         """This config with the hand's own values where it leaves them open (``sphere_margin_m``:
@@ -90,6 +93,8 @@ class SynthConfig(Config):
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")
+        if not (math.isfinite(self.link_activation_m) and self.link_activation_m > 0):
+            raise ConfigError(f"SynthConfig.link_activation_m must be a finite number > 0 m, got {self.link_activation_m}")
         if self.iters < 1 or self.num_directions < 1:
             raise ConfigError(f"SynthConfig: iters and num_directions must be >= 1, got {self.iters}, {self.num_directions}")
         if self.task_energy_kind not in ("cos", "l2"):

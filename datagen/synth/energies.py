@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from datagen.synth.links import LinkContacts, link_contacts
 from datagen.synth.penetration import sphere_penetration
 from datagen.synth.scenery import Scenery
 from datagen.synth.self_collision import SelfPairList, self_overlap_energy
@@ -50,6 +51,8 @@ class HandObjectState:
     max_penetration: torch.Tensor  # (B,) deepest sphere penetration, m
     self_penetration: torch.Tensor  # (B,) summed squared pair overlap, m^2
     joint_violation: torch.Tensor  # (B,) rad
+    links: LinkContacts | None = None  # a grasp type's extra contact links (palm, phalanges), L of them
+    link_pull: torch.Tensor | None = None  # (L,) bool: pulled onto the surface by E_dist (else GWS candidates only)
 
 
 @dataclass
@@ -62,9 +65,13 @@ class EnergyTerms:
     self_penetration: torch.Tensor
     joint_limits: torch.Tensor
     total: torch.Tensor
+    link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
 
     def as_dict(self) -> dict[str, torch.Tensor]:
-        return {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
+        out = {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
+        if self.link_distance is not None:
+            out["link_distance"] = self.link_distance
+        return out
 
 
 def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, exact: bool = True):
@@ -110,7 +117,8 @@ def contact_sphere_index(hand) -> torch.Tensor:
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
-                      scenery: Scenery | None = None) -> HandObjectState:
+                      scenery: Scenery | None = None, links: torch.Tensor | None = None,
+                      link_pull: torch.Tensor | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -118,7 +126,10 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     how far collision spheres may sink into the object before they count as penetrating.
     ``self_collision=False`` skips the sphere-pair overlap (zero) when its weight is 0;
     ``self_pairs`` reuses its pair lists across calls on the same batch (an optimizer run);
-    ``scenery``: static boxes the spheres must also stay out of (penetration terms).
+    ``scenery``: static boxes the spheres must also stay out of (penetration terms);
+    ``links`` ``(L,)``: a grasp type's extra contact links, the palm and phalanges, at their
+    nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
+    distance term pulls.
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -141,6 +152,9 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                           if self_collision
                           else centres_all.new_zeros(centres_all.shape[0])),
         joint_violation=violation,
+        links=(link_contacts(hand, targets, object_index, centres, radii, links)
+               if links is not None and links.numel() else None),
+        link_pull=link_pull,
     )
 
 
@@ -161,6 +175,25 @@ def task_origins(task, targets, object_index: torch.Tensor, cfg) -> torch.Tensor
     return com.to(object_index.device)[object_index]
 
 
+def contact_bounds(gap: torch.Tensor, cfg) -> torch.Tensor:
+    """``(...)`` normal-force bound of an extra contact link in the GWS from its gap ``(...)`` m:
+    1 when touching (gap at most ``-cfg.sphere_margin_m``, the sink the penetration term allows),
+    falling linearly to 0 at ``cfg.link_activation_m`` beyond that."""
+    return (1.0 - torch.relu(gap + cfg.sphere_margin_m) / cfg.link_activation_m).clamp(0.0, 1.0)
+
+
+def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """``(points (B, m, 3), inward normals (B, m, 3), bounds (B, m) or None)``: the grasp's
+    contacts for the GWS, the task fingertips (bound 1) then a grasp type's extra links (bound
+    :func:`contact_bounds`); None: fingertips only, every bound 1."""
+    if state.links is None:
+        return state.contact_points, state.contact_normals, None
+    tips = state.contact_points.new_ones(state.contact_points.shape[:2])
+    return (torch.cat([state.contact_points, state.links.points], 1),
+            torch.cat([state.contact_normals, state.links.normals], 1),
+            torch.cat([tips, contact_bounds(state.links.gap, cfg)], 1))
+
+
 def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
                    task_origin: torch.Tensor | None = None) -> EnergyTerms:
     """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
@@ -173,19 +206,24 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     the penetration term allows, since the spheres overshoot the hand's collision shapes).
     """
     w = cfg.weights
+    if cfg.sphere_margin_m is None:
+        raise ValueError("evaluate_state needs a SynthConfig resolved for its hand (SynthConfig.for_hand)")
+    points, normals, bounds = contact_set(state, cfg)
     if w.task > 0:
         w_t = list(task.w_t) if task_origin is None else task_wrench_at_contacts(
-            task.w_t, state.contact_points, task_origin.to(state.contact_points.dtype), normalize=cfg.contact.normalize)
-        e_task = cfg.contact.task_energy(state.contact_points, state.contact_normals, w_t, task.gamma_deg, directions,
-                                         kind=cfg.task_energy_kind) / directions.shape[0]
+            task.w_t, points, task_origin.to(points.dtype), normalize=cfg.contact.normalize)
+        e_task = cfg.contact.task_energy(points, normals, w_t, task.gamma_deg, directions,
+                                         kind=cfg.task_energy_kind, weights=bounds) / directions.shape[0]
         if cfg.pinch_antipodal > 0 and task.gamma_deg >= 180 and state.contact_points.shape[-2] == 2:
             # a two-finger pinch: E_t cannot see how far its normals turn from its axis (wrench/antipodal.py)
             e_task = e_task + cfg.pinch_antipodal * pinch_antipodal_error(state.contact_points, state.contact_normals)
     else:
         e_task = state.tip_distance.new_zeros(state.tip_distance.shape[0])
-    if cfg.sphere_margin_m is None:
-        raise ValueError("evaluate_state needs a SynthConfig resolved for its hand (SynthConfig.for_hand)")
     e_dist = ((state.tip_distance + cfg.sphere_margin_m) ** 2).sum(-1)
-    total = (w.task * e_task + w.distance * e_dist + w.penetration * state.sphere_penetration
+    e_link = e_dist.new_zeros(e_dist.shape)
+    if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
+        e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
+    total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
-    return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total)
+    return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total,
+                       link_distance=e_link if state.links is not None else None)

@@ -16,8 +16,11 @@ from schemas import arrow_schema
 __all__ = ["grasp_id", "hand_asset_sha256", "result_table"]
 
 
-def grasp_id(object_id: str, scale: float, hand: str, task: str, seed: int, index: int) -> str:
+def grasp_id(object_id: str, scale: float, hand: str, task: str, seed: int, index: int,
+             grasp_type: str = "precision") -> str:
     key = f"{object_id}|{scale:.6f}|{hand}|{task}|{seed}|{index}"
+    if grasp_type not in ("precision", "task"):  # the fingertip grasps keep the ids they had
+        key += f"|{grasp_type}"
     return hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
@@ -54,8 +57,8 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
     asset = hand_asset_sha256(hand)
     e = {k: f32(v) for k, v in result.energies.items()}
     columns = {
-        "grasp_id": [grasp_id(targets[k].object_id, targets[k].scale, hand.name, task.name, result.seed, int(i))
-                     for k, i in zip(oi, index)],
+        "grasp_id": [grasp_id(targets[k].object_id, targets[k].scale, hand.name, task.name, result.seed, int(i),
+                              result.grasp_type) for k, i in zip(oi, index)],
         "object_id": [targets[k].object_id for k in oi],
         "split": [(splits or {}).get(targets[k].object_id, "") for k in oi],
         "object_scale_m": np.array([targets[k].scale for k in oi], dtype=np.float32),
@@ -65,6 +68,7 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
         "hand_asset_sha256": [asset] * B,
         "joint_names": [list(hand.joint_names)] * B,
         "task": [task.name] * B,
+        "grasp_type": [result.grasp_type] * B,
         "w_t": fixed(np.tile(np.asarray(task.w_t, dtype=np.float32) / np.linalg.norm(task.w_t), (B, 1)), 6),
         "gamma_deg": np.full(B, task.gamma_deg, dtype=np.float32),
         "pregrasp_qpos": fixed(result.pregrasp, nq),

@@ -29,7 +29,7 @@ from __future__ import annotations
 import torch
 
 __all__ = ["actuator_compliance", "backtrack_pregrasp", "balanced_forces", "force_squeeze", "grip_forces",
-           "joint_mobility", "tip_jacobian"]
+           "joint_mobility", "point_jacobian", "tip_jacobian"]
 
 
 def tip_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor) -> torch.Tensor:
@@ -65,22 +65,28 @@ def _balance(f: torch.Tensor, unit_mobility: torch.Tensor | None = None) -> torc
 
 
 def grip_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, force_n: float,
-                mount: tuple | None = None) -> torch.Tensor:
+                mount: tuple | None = None, min_normal: torch.Tensor | None = None,
+                active: torch.Tensor | None = None, scale_count: int | None = None) -> torch.Tensor:
     """``(B, C, 3)`` N: the :func:`balanced_forces` of each sample, scaled so that the largest is
     ``force_n`` times the set's balance (:func:`_balance`). ``mount`` ``(kind, axis, anchor_m,
     mounted (B,) bool)``: the samples on a mounted object balance only the force along its joint
-    (:func:`joint_mobility`; None: every sample is free)."""
+    (:func:`joint_mobility`; None: every sample is free). ``min_normal`` / ``active`` ``(B, C)``:
+    as :func:`balanced_forces`; ``scale_count``: only the first that many contacts (the
+    fingertips) set the scale (None: all)."""
     mounted = torch.zeros(points.shape[0], dtype=torch.bool, device=points.device) if mount is None else mount[3]
-    on = points.new_ones(points.shape[:2])
+    on = points.new_ones(points.shape[:2]) if active is None else active.to(points.dtype)
     f = torch.empty_like(points)
     balance = points.new_empty(points.shape[0])
     for rows, joint in ((~mounted).nonzero().squeeze(-1), None), (mounted.nonzero().squeeze(-1), mount):
         if rows.numel() == 0:
             continue
         u = None if joint is None else joint_mobility(points[rows], *joint[:3])
-        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=u)
+        f[rows] = balanced_forces(points[rows], inward_normals[rows], mu, mobility=u,
+                                  min_normal=None if min_normal is None else min_normal[rows],
+                                  active=None if active is None else active[rows])
         balance[rows] = _balance(f[rows], None if u is None else _unit_mobility(u, on[rows]))
-    return f * (force_n * balance / f.norm(dim=-1).amax(-1).clamp_min(1e-9))[:, None, None]
+    largest = f[:, :scale_count].norm(dim=-1).amax(-1) if scale_count else f.norm(dim=-1).amax(-1)
+    return f * (force_n * balance / largest.clamp_min(1e-9))[:, None, None]
 
 
 def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m):
@@ -212,7 +218,7 @@ def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                   points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
                   approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
-                  mount: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                  mount: tuple | None = None, extra: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze makes balanced grip forces.
 
     Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
@@ -226,10 +232,49 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     (``pregrasp = 2 grasp - squeeze``), so the fingers open along the same directions.
     ``mount``: the joint of a mounted object and the samples on it, whose balance counts only the
     force along that joint (:func:`grip_forces`).
+
+    ``extra`` ``(points (B, L, 3), inward normals (B, L, 3), links (B, L), touching (B, L))``: a
+    power grasp's other contacts (the palm centre, the phalanges' nearest points; ``links`` the
+    hand link carrying each). Those touching take part in the balance with a normal force >= 0
+    (they may carry load, need not), so the fingertips' forces no longer have to cancel among
+    themselves: the palm (no movable joint) only reacts, and the joint torques include the
+    phalanges' share, ``tau = sum_c J_c^T f_c``. The scale is still set by the largest fingertip
+    force.
     """
-    J = tip_jacobian(hand, root_pose, joints, tip_spheres) * movable.to(joints.dtype)  # (B, 3F, J)
-    f = grip_forces(points, inward_normals, mu, force_n, mount=mount)
-    return _grip(hand, joints, J, f, J, inward_normals, movable, kp, approach_m, damping_m)
+    mm = movable.to(joints.dtype)
+    Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * mm  # (B, 3F, J)
+    if extra is None:
+        f = grip_forces(points, inward_normals, mu, force_n, mount=mount)
+        return _grip(hand, joints, Jt, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
+    lp, ln, links, touching = extra
+    B, F = points.shape[:2]
+    P, N = torch.cat([points, lp], 1), torch.cat([inward_normals, ln], 1)
+    active = torch.cat([torch.ones(B, F, dtype=torch.bool, device=P.device), touching], 1)
+    lo = torch.cat([P.new_ones(B, F), P.new_zeros(touching.shape)], 1)
+    f = grip_forces(P, N, mu, force_n, mount=mount, min_normal=lo, active=active, scale_count=F)
+    tip_links = hand.sphere_link_index[tip_spheres].expand(B, F)
+    Jc = point_jacobian(hand, root_pose, joints, torch.cat([tip_links, links], 1), P) * mm  # (B, 3C, J)
+    return _grip(hand, joints, Jc, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
+
+
+def point_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, links: torch.Tensor,
+                   points: torch.Tensor) -> torch.Tensor:
+    """``(B, 3C, J)`` d(points)/d(joints), m/rad, through the joint couplings, of world points
+    ``(B, C, 3)`` m rigidly carried by hand links ``links (B, C)`` (indices into the hand's links)."""
+    B, J = joints.shape
+    R = 3 * links.shape[1]
+    rows = torch.arange(B, device=joints.device)[:, None]
+    with torch.no_grad():
+        Tl = hand.link_transforms(root_pose.detach(), hand.apply_couplings(joints.detach()))[rows, links]
+        local = (Tl[..., :3, :3].transpose(-1, -2) @ (points - Tl[..., :3, 3])[..., None]).squeeze(-1)  # (B, C, 3)
+    with torch.enable_grad():  # one pass over R copies of the batch: copy r carries output row r
+        q = joints.detach().repeat(R, 1).requires_grad_(True)  # (R B, J)
+        T = hand.link_transforms(root_pose.detach().repeat(R, 1), hand.apply_couplings(q)).reshape(R, B, -1, 4, 4)
+        Ti = T[:, rows, links]  # (R, B, C, 4, 4)
+        x = ((Ti[..., :3, :3] @ local[None, ..., None]).squeeze(-1) + Ti[..., :3, 3]).reshape(R, B, R)
+        r = torch.arange(R, device=joints.device)
+        (g,) = torch.autograd.grad(x[r, :, r].sum(), q)
+    return g.reshape(R, B, J).transpose(0, 1)
 
 
 def backtrack_pregrasp(hand, grasp: torch.Tensor, pregrasp: torch.Tensor, depth_fn, slack_m: float = 5e-4,

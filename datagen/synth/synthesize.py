@@ -18,11 +18,13 @@ cabinet: `datagen.synth.scenery`) is part of every penetration term and of the i
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import torch
 
 from datagen.synth.config import SynthConfig, TaskSpec
+from datagen.tasks.grasp_type import TASK_GRASP_TYPE, load_grasp_type
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state, task_origins
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
@@ -49,6 +51,7 @@ class SynthesisResult:
     max_penetration: torch.Tensor | None = None  # (B,) m, deepest sphere penetration
     epsilon: torch.Tensor | None = None  # (B,)
     fingers: list[str] = field(default_factory=list)
+    grasp_type: str = "precision"  # the grasp type whose contact set the poses were synthesized with
     seed: int = 0
     timings: dict[str, float] = field(default_factory=dict)
 
@@ -197,20 +200,42 @@ class _Batch:
     root: torch.Tensor  # (B S, 7) initial root poses
     joints: torch.Tensor  # (B S, J) initial joints, coupled
     directions: torch.Tensor  # (K, 6) wrench directions
+    links: torch.Tensor | None = None  # (L,) the grasp type's extra contact links (palm, phalanges); None: fingertips only
+    link_pull: torch.Tensor | None = None  # (L,) bool: those the distance term pulls onto the surface
 
 
-def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator) -> _Batch:
+def _grasp_links(hand, grasp_type, finger_index) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """``(links (L,), pull (L,) bool)`` of a grasp type's extra contact roles: the palm link and
+    the phalanges (each taking part at its nearest collision sphere), and which of them the
+    distance term pulls (None, None: the fingertips only)."""
+    from datagen.synth.links import contact_links
+
+    palm, phal = grasp_type.role("palm"), grasp_type.role("phalanges")
+    phalanges = contact_links(hand, finger_index) if phal is not None else []
+    links = ([hand.palm_link] if palm is not None else []) + phalanges
+    pull = ([palm == "pull"] if palm is not None else []) + [phal == "pull"] * len(phalanges)
+    if not links:
+        return None, None
+    return (torch.tensor(links, dtype=torch.long, device=hand.device),
+            torch.tensor(pull, dtype=torch.bool, device=hand.device))
+
+
+def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, grasp_type=None) -> _Batch:
     """The batch's indices, the task fingertips, the initial poses and the wrench directions
-    (drawn from ``gen`` in that order)."""
+    (drawn from ``gen`` in that order); ``grasp_type`` (`datagen.tasks.GraspType`): its extra
+    contact links and its initial-pose fields over the task's (None: the fingertips only)."""
     dev, dt = hand.device, hand.dtype
     object_index = torch.arange(len(targets), device=dev).repeat_interleave(num_per_object)
     finger_index = _resolve_fingers(hand, task)
+    links, pull = _grasp_links(hand, grasp_type, finger_index) if grasp_type is not None else (None, None)
+    if grasp_type is not None:
+        task = dataclasses.replace(task, init=grasp_type.apply_init(task.init))
     seed_index = object_index.repeat_interleave(cfg.seeds_per_grasp)  # seeds of grasp b: rows b S .. b S + S - 1
     scenery = Scenery.for_task(task, targets, dev, dt)  # a mounted object's door, housing or cabinet
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
     return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,
-                  root, hand.apply_couplings(joints), directions)
+                  root, hand.apply_couplings(joints), directions, links, pull)
 
 
 def _energy_on(hand, targets, task, cfg, b: _Batch):
@@ -226,7 +251,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=b.scenery)
+                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull)
             terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
@@ -262,6 +287,18 @@ def _optimize(hand, targets, task, cfg, b: _Batch, callback, threads: int):
     return x, extras, torch.cat([root, joints], -1)
 
 
+def _squeeze_extra(hand, state, cfg):
+    """A grasp type's extra contacts for the squeeze (`force_squeeze`'s ``extra``): the palm and
+    the phalanges, touching within ``cfg.seed_contact_gap_m`` of the surface (the sphere margin
+    added back); None for the fingertips alone."""
+    lc = state.links
+    if lc is None:
+        return None
+    links = hand.sphere_link_index[lc.sphere]  # (B, L)
+    touching = lc.gap + cfg.sphere_margin_m <= cfg.seed_contact_gap_m
+    return lc.points, lc.normals, links, touching
+
+
 def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
     """``(grasp, pregrasp, squeeze, state)`` at the optimized poses: the squeeze presses the task
     fingertips with balanced grip forces (`datagen.synth.squeeze.force_squeeze`), the pregrasp is
@@ -270,10 +307,12 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
     with torch.no_grad():
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
-                                  sphere_margin=cfg.sphere_margin_m, scenery=b.scenery)
+                                  sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
+                                  link_pull=b.link_pull)
         pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
                                     cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
-                                    finger_joint_mask(hand), mount=_mount(task, targets, idx))
+                                    finger_joint_mask(hand), mount=_mount(task, targets, idx),
+                                    extra=_squeeze_extra(hand, state, cfg))
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, idx, root_f, j, b.tip_spheres, self_collision=False,
@@ -282,6 +321,13 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     cat = lambda j: torch.cat([root_f, j], -1)  # noqa: E731
     return cat(grasp_j), cat(pre_j), cat(sq_j), state
+
+
+def _row_grasp_type(task: TaskSpec, grasp_type) -> str:
+    """What a row records: the grasp type, or ``task`` for a task naming its own fingertips
+    synthesized with the fingertip-only (precision) contact set."""
+    own = task.fingers != "all" and not grasp_type.extra_contacts
+    return TASK_GRASP_TYPE if own else grasp_type.name
 
 
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
@@ -298,7 +344,8 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     cfg = cfg.for_hand(hand)
     threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
-    b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed))
+    gt = load_grasp_type(cfg.grasp_type)
+    b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed), gt)
     x, extras, initial = _optimize(hand, targets, task, cfg, b, callback, threads)
     t_opt = time.perf_counter() - t0
     grasp, pregrasp, squeeze, state = _finish(hand, targets, task, cfg, b, x)
@@ -310,6 +357,6 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
         contact_points=state.contact_points, contact_normals=state.contact_normals,
         tip_distance=state.tip_distance, max_penetration=state.max_penetration, epsilon=eps.detach(),
         energies={k: v for k, v in extras.items() if k not in ("tip_distance", "max_penetration")},
-        fingers=[hand.fingertip_names[i] for i in b.finger_index], seed=cfg.seed,
+        fingers=[hand.fingertip_names[i] for i in b.finger_index], grasp_type=_row_grasp_type(task, gt), seed=cfg.seed,
         timings={"optimize_s": t_opt, "total_s": time.perf_counter() - t0},
     )

@@ -8,19 +8,21 @@
     task_test_from_spec(spec)               # TaskTest: the physical test (datagen.eval), None: six directions
     task_scenery(spec)                      # static boxes round a mounted object (door, housing, cabinet)
     task_targets(spec, targets)             # the objects it runs on
+    load_grasp_type("power")                # GraspType: a force-closure grasp's contact set (grasp_types/)
 
 Modules: ``spec`` (TaskSpec, InitConfig, loading), ``evaluation`` (the ``eval`` block, TaskTest),
-``pairing`` (task/object pairing). Depends only on `datagen.config`, `datagen.errors` and
+``pairing`` (task/object pairing), ``grasp_type`` (grasp types and the per-size mix). Depends only on `datagen.config`, `datagen.errors` and
 `datagen.objects.task_objects`.
 """
 
 from .evaluation import (EVAL_KEYS, TaskTest, builtin_task_test, has_builtin_test, task_object, task_scenery,
                          task_test_from_spec)
+from .grasp_type import GraspBand, GraspMix, GraspType, builtin_grasp_types, load_grasp_type
 from .pairing import task_object_id, task_targets
 from .spec import SPEC_DIR, HandOverride, InitConfig, TaskSpec, builtin_tasks, load_task
 
 __all__ = [
-    "EVAL_KEYS", "SPEC_DIR", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_task_test", "builtin_tasks",
-    "has_builtin_test", "load_task", "task_object", "task_object_id", "task_scenery", "task_targets",
+    "EVAL_KEYS", "SPEC_DIR", "GraspBand", "GraspMix", "GraspType", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_grasp_types", "builtin_task_test", "builtin_tasks",
+    "has_builtin_test", "load_grasp_type", "load_task", "task_object", "task_object_id", "task_scenery", "task_targets",
     "task_test_from_spec",
 ]

@@ -57,19 +57,28 @@ def tangent_basis(normals: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return d, e
 
 
-def normalize_contact_positions(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def normalize_contact_positions(points: torch.Tensor, weights: torch.Tensor | None = None
+                                ) -> tuple[torch.Tensor, torch.Tensor]:
     """Contact position normalization (CPN, paper Sec. IV-A).
 
     ``p'_i = (p_i - mean_j p_j) / d`` with ``d = mean_i |p_i - mean_j p_j|``.
 
     Args:
         points: ``(..., m, 3)`` contact positions, metres.
+        weights: ``(..., m)`` >= 0, optional: the means are weighted (a contact of weight 0 does
+            not move the centroid or the scale: the normalization of the other contacts alone).
     Returns:
         ``(normalized (..., m, 3) dimensionless, d (...,) metres)``. Coincident contacts give
         ``d = 0`` and all-zero normalized positions (finite gradients).
     """
-    centred = points - points.mean(dim=-2, keepdim=True)
-    d = safe_norm(centred, dim=-1).mean(dim=-1)
+    if weights is None:
+        centred = points - points.mean(dim=-2, keepdim=True)
+        d = safe_norm(centred, dim=-1).mean(dim=-1)
+    else:
+        w = weights.to(points.dtype)
+        total = w.sum(-1, keepdim=True).clamp_min(_tiny(points))  # (..., 1)
+        centred = points - (w[..., None] * points).sum(-2, keepdim=True) / total[..., None]
+        d = (w * safe_norm(centred, dim=-1)).sum(-1) / total[..., 0]
     scale = torch.where(d > _tiny(points), d, torch.ones_like(d))
     normalized = centred / scale[..., None, None]
     return normalized, torch.where(d > _tiny(points), d, torch.zeros_like(d))

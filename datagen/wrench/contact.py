@@ -48,9 +48,10 @@ class ContactModel(Config):
         return task_epsilon(points, normals, self.mu, w_t, gamma_deg, normalize=self.normalize, **kw)
 
     def task_energy(self, points: torch.Tensor, normals: torch.Tensor, w_t, gamma_deg, directions: torch.Tensor,
-                    kind: str = "cos") -> torch.Tensor:
-        """``(...)`` E_t (eq. 8, `datagen.wrench.task_energy`) over ``directions (K, 6)``."""
+                    kind: str = "cos", weights: torch.Tensor | None = None) -> torch.Tensor:
+        """``(...)`` E_t (eq. 8, `datagen.wrench.task_energy`) over ``directions (K, 6)``;
+        ``weights (..., m)``: each contact's normal-force bound (None: 1 each, the paper's)."""
         from datagen.wrench.tws import task_energy
 
         return task_energy(points, normals, self.mu, w_t, gamma_deg, directions, kind=kind,
-                           delta_deg=self.delta_deg, normalize=self.normalize)
+                           delta_deg=self.delta_deg, normalize=self.normalize, weights=weights)

@@ -74,6 +74,7 @@ def grasp_matrix(
     *,
     normalize: bool = True,
     contact_model: str = "pcf",
+    weights: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Stacked grasp matrices ``G = [G_1 ... G_m]`` and the CPN length scale.
 
@@ -82,13 +83,17 @@ def grasp_matrix(
         normals: ``(..., m, 3)`` inward unit normals (renormalized here).
         normalize: apply contact position normalization first.
         contact_model: ``"pcf"`` (``G_i`` 6x3) or ``"sfc"`` (6x4, last column ``[0; n]``).
+        weights: ``(..., m)`` >= 0, optional: each contact's normal-force bound (1: the paper's
+            L-infinity bound; 0: the contact carries nothing, as if it were absent). ``G_i`` is
+            scaled by it, so the GWS is the Minkowski sum of the cones scaled by their bounds;
+            under CPN the centroid and length are the weighted means.
     Returns:
         ``(G (..., 6, m*c), scale (...))`` with ``c`` 3 or 4 columns per contact in the order
         ``(n, d, e[, torsion])``; ``scale`` is the CPN length in metres (1 without CPN).
     """
     n = safe_normalize(normals)
     if normalize:
-        p, scale = normalize_contact_positions(points)
+        p, scale = normalize_contact_positions(points, weights)
     else:
         p, scale = points, torch.ones(points.shape[:-2], dtype=points.dtype, device=points.device)
     d, e = tangent_basis(n)
@@ -99,6 +104,8 @@ def grasp_matrix(
         forces = torch.cat([forces, zeros], dim=-1)
         torques = torch.cat([torques, n[..., None]], dim=-1)
     G = torch.cat([forces, torques], dim=-2)  # (..., m, 6, c)
+    if weights is not None:
+        G = G * weights.to(G.dtype)[..., None, None]
     m, c = G.shape[-3], G.shape[-1]
     G = G.movedim(-3, -2).reshape(*G.shape[:-3], 6, m * c)
     return G, scale
@@ -120,6 +127,7 @@ def grasp_wrench_boundary(
     normalize: bool = True,
     contact_model: str = "pcf",
     torsional_mu: float = 0.0,
+    weights: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Points on the grasp wrench boundary, ``s_Wg(u_k)`` for each direction (eq. 4).
 
@@ -133,13 +141,14 @@ def grasp_wrench_boundary(
         contact_model: ``"pcf"`` point contact with friction, ``"sfc"`` soft finger.
         torsional_mu: SFC torsional coefficient, metres (divided by the CPN scale when
             ``normalize`` so the model stays frame invariant).
+        weights: ``(..., m)`` each contact's normal-force bound (see :func:`grasp_matrix`).
     Returns:
         ``(..., K, 6)`` boundary wrenches ``[f, tau]`` (dimensionless under CPN).
     """
     _check_inputs(points, normals, mu, contact_model, torsional_mu)
     if not 0.0 <= delta_deg <= MAX_DELTA_DEG:
         raise ValueError(f"delta_deg must lie in [0, {MAX_DELTA_DEG}], got {delta_deg}")
-    G, scale = grasp_matrix(points, normals, normalize=normalize, contact_model=contact_model)
+    G, scale = grasp_matrix(points, normals, normalize=normalize, contact_model=contact_model, weights=weights)
     return boundary_from_matrix(
         G, scale, directions, mu, points.shape[-2], math.radians(delta_deg),
         contact_model=contact_model, torsional_mu=torsional_mu, normalize=normalize,

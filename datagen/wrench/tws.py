@@ -112,18 +112,20 @@ def task_energy(
     normalize: bool = True,
     contact_model: str = "pcf",
     torsional_mu: float = 0.0,
+    weights: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Task-oriented energy ``E_t = -sum_k cos angle(s_Wt(u_k), s_Wg(u_k))`` (eq. 8), ``(...)``.
 
     ``kind="l2"`` is the paper's L2 ablation, ``sum_k |s_Wt(u_k) - s_Wg(u_k)|^2``. A GWS support
     point at the origin (the direction is not covered at all) contributes cosine 0 with a finite
-    gradient. Arguments as :func:`grasp_wrench_boundary` and :func:`task_wrench_support`.
+    gradient. Arguments as :func:`grasp_wrench_boundary` (``weights (..., m)``: each contact's
+    normal-force bound) and :func:`task_wrench_support`.
     """
     if kind not in TASK_ENERGY_KINDS:
         raise ValueError(f"kind must be one of {TASK_ENERGY_KINDS}, got {kind!r}")
     s_g = grasp_wrench_boundary(
         points, normals, directions, mu, delta_deg=delta_deg, normalize=normalize,
-        contact_model=contact_model, torsional_mu=torsional_mu,
+        contact_model=contact_model, torsional_mu=torsional_mu, weights=weights,
     )
     s_t = task_wrench_support(directions.to(s_g.dtype), w_t, gamma_deg)
     if kind == "l2":

@@ -143,3 +143,21 @@ def test_library_call_synth_command_and_a_one_object_job_make_the_same_grasps(tm
     job = pq.read_table(next((tmp_path / "job" / "shards").glob("*.parquet"))).to_pylist()
     assert len(lib) == 2 and lib[0]["seed"] == 0
     assert _same(lib) == _same(cli) == _same(job)
+
+
+def test_grasp_types_resolve_like_a_layer_and_a_name_means_every_grasp():
+    from datagen.tasks import GraspMix
+
+    bands = {"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1}}, {"mix": {"power": 1}}]}
+    r = resolve("shadow", "force_closure", config={"grasp_types": bands})
+    assert r.grasp_types.counts(0.06, 2) == {"precision": 2} and r.grasp_types.counts(0.12, 2) == {"power": 2}
+    flagged = resolve("shadow", "force_closure", config={"grasp_types": bands}, flags={"grasp_types": "precision"})
+    assert flagged.grasp_types == GraspMix.single("precision")
+    assert resolve("shadow", "force_closure").grasp_types == GraspMix.from_dict(PRESETS["dataset"].get("grasp_types"))
+    assert r.hash() != resolve("shadow", "force_closure", flags={"grasp_types": "precision"}).hash()
+    with pytest.raises(ConfigError, match="unknown grasp type 'grip'"):
+        resolve("shadow", "force_closure", flags={"grasp_types": "grip"})
+    with pytest.raises(ConfigError, match="synth.grasp_type is chosen per object size by grasp_types"):
+        resolve("shadow", "force_closure", config={"synth": {"grasp_type": "power"}})
+    with pytest.raises(ConfigError, match="grasp_types must be a grasp type's name or a mapping"):
+        resolve("shadow", "force_closure", config={"grasp_types": 3})

@@ -296,3 +296,34 @@ def test_grip_forces_on_a_mounted_knob_grip_with_the_full_force():
     torch.testing.assert_close(same, free)  # samples not on the mounted object: the free rule
     both = grip_forces(p.expand(2, -1, -1), n.expand(2, -1, -1), 0.5, 10.0, mount=(*hinge, torch.tensor([False, True])))
     torch.testing.assert_close(both, torch.cat([free, mounted]))  # a mixed batch, row by row
+
+
+def test_point_jacobian_matches_finite_differences_of_the_carried_points(hand):
+    """d(point)/d(joints) of points rigidly carried by phalanges and the palm (a power grasp's
+    squeeze) against central differences of the hand's forward kinematics."""
+    from datagen.synth.squeeze import point_jacobian
+
+    g = torch.Generator().manual_seed(2)
+    B = 2
+    root = torch.tensor([[0.0, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0]], dtype=hand.dtype).expand(B, -1)
+    q = hand.apply_couplings(hand.joint_lower + (hand.joint_upper - hand.joint_lower)
+                             * torch.rand(B, hand.num_joints, generator=g, dtype=hand.dtype))
+    links = torch.tensor([[hand.palm_link, 3, 8], [5, hand.palm_link, 12]])
+    offsets = 0.01 * torch.randn(B, 3, 3, generator=g, dtype=hand.dtype)
+    T = hand.link_transforms(root, q)
+    rows = torch.arange(B)[:, None]
+    Tl = T[rows, links]
+    points = Tl[..., :3, 3] + offsets  # world points near each link's origin
+    local = (Tl[..., :3, :3].transpose(-1, -2) @ offsets[..., None]).squeeze(-1)
+
+    def carried(qq):
+        Ti = hand.link_transforms(root, hand.apply_couplings(qq))[rows, links]
+        return ((Ti[..., :3, :3] @ local[..., None]).squeeze(-1) + Ti[..., :3, 3]).reshape(B, -1)
+
+    J = point_jacobian(hand, root, q, links, points)
+    h = 1e-3  # float32 kinematics: central differences good to ~1e-5 m/rad
+    fd = torch.stack([(carried(q + h * e) - carried(q - h * e)) / (2 * h)
+                      for e in torch.eye(hand.num_joints, dtype=hand.dtype)], -1)
+    assert J.shape == (B, 9, hand.num_joints)
+    assert torch.allclose(J, fd, atol=1e-4)
+    assert J.abs().max() > 0.01

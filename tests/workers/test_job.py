@@ -119,3 +119,23 @@ def test_auto_layout_is_chosen_once_and_kept_on_resume(tmp_path):
         job.init(JobConfig(**{**cfg.to_dict(), "objects_per_shard": 2}))
     with pytest.raises(JobError, match="objects_per_shard"):
         JobConfig(objects_per_shard="many")
+
+
+def test_grasp_types_are_a_recipe_layer_of_the_job(tmp_path):
+    """``grasp_types`` in a job config (or ``--grasp-type``) reaches every task's recipe and the
+    hash; an unknown type is refused naming it."""
+    import argparse
+
+    from datagen.tasks import GraspMix
+    from workers.cli import _config, register_run
+
+    base = tiny_config("procedural")
+    power = JobConfig(**{**base.to_dict(), "grasp_types": "power"})
+    assert power.recipes()[0].grasp_types == GraspMix.single("power")
+    assert power.hash() != base.hash()
+    with pytest.raises(JobError, match="unknown grasp type 'hook'"):
+        JobConfig(**{**base.to_dict(), "grasp_types": "hook"})
+    ap = argparse.ArgumentParser()
+    register_run(ap.add_subparsers(dest="cmd"))
+    args = ap.parse_args(["run", "--out", str(tmp_path / "j"), "--grasp-type", "power"])
+    assert _config(args).recipes()[0].grasp_types == GraspMix.single("power")

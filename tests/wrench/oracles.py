@@ -54,14 +54,15 @@ def _solve(P_cols: int, c: np.ndarray, rows: list, b: list, cones: list):
     return sol
 
 
-def _cone_rows(maps, mu, mu_t, offset, n_vars):
-    """Rows/cones of each contact's finite friction cone (0 <= f1 <= 1, SOC)."""
+def _cone_rows(maps, mu, mu_t, offset, n_vars, bounds=None):
+    """Rows/cones of each contact's finite friction cone (0 <= f1 <= bound, 1 by default; SOC)."""
     rows, b, cones = [], [], []
     col = offset
-    for G in maps:
+    for i, G in enumerate(maps):
         c = G.shape[1]
-        r = np.zeros((1, n_vars)); r[0, col] = 1.0  # f1 <= 1
-        rows.append(r); b.append(np.ones(1)); cones.append(clarabel.NonnegativeConeT(1))
+        r = np.zeros((1, n_vars)); r[0, col] = 1.0  # f1 <= bound
+        rows.append(r); b.append(np.full(1, 1.0 if bounds is None else float(bounds[i])))
+        cones.append(clarabel.NonnegativeConeT(1))
         soc = np.zeros((c, n_vars))
         soc[0, col] = -1.0
         soc[1, col + 1] = -1.0 / mu
@@ -88,12 +89,12 @@ def radial_scale(maps, mu: float, w: np.ndarray, mu_t: float = 1.0) -> float:
     return float(sol.x[0])
 
 
-def support_socp(maps, mu: float, u: np.ndarray, mu_t: float = 1.0) -> float:
-    """max_{w in GWS} u.w by SOCP."""
+def support_socp(maps, mu: float, u: np.ndarray, mu_t: float = 1.0, bounds=None) -> float:
+    """max_{w in GWS} u.w by SOCP; ``bounds`` (m,): each contact's normal-force bound (None: 1)."""
     widths = [G.shape[1] for G in maps]
     n_vars = sum(widths)
     Gcat = np.hstack(maps)
-    rows, b, cones = _cone_rows(maps, mu, mu_t, 0, n_vars)
+    rows, b, cones = _cone_rows(maps, mu, mu_t, 0, n_vars, bounds)
     sol = _solve(n_vars, -(Gcat.T @ u), rows, b, cones)
     return float(-sol.obj_val)
 

@@ -173,3 +173,38 @@ def test_bad_arguments_are_named(kwargs, match):
         grasp_wrench_boundary(p, n[:2], u, 0.5)
     with pytest.raises(ValueError, match="mu"):
         grasp_wrench_boundary(p, n, u, -0.1)
+
+
+@pytest.mark.parametrize("mu", [0.3, 1.0])
+def test_weighted_support_matches_socp_with_force_bounds(mu):
+    """A grasp type's extra contacts enter the GWS with a normal-force bound each (grasp_matrix
+    ``weights``): the support equals the SOCP whose contact i has 0 <= f_n <= bound_i."""
+    p, n = _contacts(7, 5, "box")
+    bounds = torch.tensor([1.0, 1.0, 0.25, 0.0, 0.6], dtype=torch.float64)
+    maps = oracles.grasp_maps(p.numpy(), n.numpy())
+    u = sample_directions(16, generator=torch.Generator().manual_seed(8), dtype=torch.float64)
+    w = grasp_wrench_boundary(p, n, u, mu, delta_deg=0.0, normalize=False, weights=bounds)
+    for k in range(len(u)):
+        ref = oracles.support_socp(maps, mu, u[k].numpy(), bounds=bounds.numpy())
+        assert float(u[k] @ w[k]) == pytest.approx(ref, rel=1e-6, abs=1e-7)
+
+
+def test_palm_contact_adds_its_bound_to_the_lift_support():
+    """Hand-computed: two fingertips pinch a ball of radius r along x; the force support along
+    +z (lifting) is friction only, 2 mu. A palm contact under the ball pushing +z with bound b
+    adds b; with bound 0 (out of reach) the GWS is the pinch's, also under CPN."""
+    mu, r = 0.5, 0.04
+    tips = torch.tensor([[r, 0, 0], [-r, 0, 0]], dtype=torch.float64)
+    tip_n = torch.tensor([[-1.0, 0, 0], [1.0, 0, 0]], dtype=torch.float64)
+    p = torch.cat([tips, torch.tensor([[0, 0, -r]], dtype=torch.float64)])
+    n = torch.cat([tip_n, torch.tensor([[0, 0, 1.0]], dtype=torch.float64)])
+    up = torch.tensor([[0, 0, 1.0, 0, 0, 0]], dtype=torch.float64)
+    for b in (1.0, 0.5):
+        w = grasp_wrench_boundary(p, n, up, mu, delta_deg=0.0, normalize=False,
+                                  weights=torch.tensor([1.0, 1.0, b], dtype=torch.float64))
+        assert float(w[0, 2]) == pytest.approx(2 * mu + b, abs=1e-12)
+    u = sample_directions(64, generator=torch.Generator().manual_seed(9), dtype=torch.float64)
+    off = grasp_wrench_boundary(p, n, u, mu, delta_deg=0.0, weights=torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64))
+    assert torch.allclose(off, grasp_wrench_boundary(tips, tip_n, u, mu, delta_deg=0.0), atol=1e-12)
+    ones = grasp_wrench_boundary(p, n, u, mu, delta_deg=15.0, weights=torch.ones(3, dtype=torch.float64))
+    assert torch.allclose(ones, grasp_wrench_boundary(p, n, u, mu, delta_deg=15.0), atol=1e-12)

@@ -1,0 +1,157 @@
+"""Grasp types as data: the contact set a force-closure grasp is synthesized with.
+
+A grasp type YAML (``datagen/tasks/grasp_types/<name>.yaml`` for the built-in ones) names the
+links beyond the fingertips that take part in the grasp, by role, so one file serves every hand
+(the roles are derived from the hand's kinematic tree: `datagen.synth.links`):
+
+* ``palm`` and ``phalanges`` (every other link on a finger's chain), each ``pull`` (pulled onto
+  the surface by the distance term, like a fingertip, and counted in the grasp wrench space while
+  touching) or ``candidate`` (counted in the GWS while touching, not pulled);
+
+plus ``init`` (`datagen.tasks.InitConfig` fields over the task's: a palm distance, closing the
+fingers onto the object). ``precision`` is the fingertip grasp of the paper (no extra contacts);
+``power`` adds the palm and the phalanges.
+
+Which type a grasp gets is the recipe's ``grasp_types`` (a `GraspMix`: per object size, a share
+of each type; `datagen.pipeline.resolve`), for force-closure tasks on every fingertip; every row
+records its ``grasp_type``. A task that names its own fingertips (the paper's Table II tasks) is
+its own contact set: its rows record ``task``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from datagen.config import Config
+from datagen.errors import ConfigError
+
+__all__ = ["CONTACT_MODES", "CONTACT_ROLES", "GRASP_TYPE_DIR", "TASK_GRASP_TYPE", "GraspBand", "GraspMix",
+           "GraspType", "builtin_grasp_types", "load_grasp_type"]
+
+GRASP_TYPE_DIR = Path(__file__).parent / "grasp_types"
+CONTACT_ROLES = ("palm", "phalanges")
+CONTACT_MODES = ("pull", "candidate")
+TASK_GRASP_TYPE = "task"  #: the grasp_type of rows of a task that names its own fingertips
+
+
+@dataclass(frozen=True)
+class GraspType(Config):
+    """One grasp type: its extra contact links by role and its initial-pose fields."""
+
+    name: str
+    #: role ("palm", "phalanges") -> "pull" or "candidate"; the fingertips are always contacts
+    contacts: Mapping[str, str] = field(default_factory=dict)
+    #: `InitConfig` fields replacing the task's (e.g. ``distance_m``, ``close``)
+    init: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        from datagen.tasks.spec import InitConfig
+
+        if not self.name or not self.name.replace("_", "").isalnum():
+            raise ConfigError(f"grasp type name must be a simple identifier, got {self.name!r}")
+        if self.name == TASK_GRASP_TYPE:
+            raise ConfigError(f"grasp type name {TASK_GRASP_TYPE!r} is reserved (rows of tasks with their own fingertips)")
+        for role, mode in dict(self.contacts).items():
+            if role not in CONTACT_ROLES:
+                raise ConfigError(f"grasp type {self.name!r}: unknown contact role {role!r}", f"roles: {list(CONTACT_ROLES)}")
+            if mode not in CONTACT_MODES:
+                raise ConfigError(f"grasp type {self.name!r}: contacts.{role} must be one of {list(CONTACT_MODES)}, "
+                                  f"got {mode!r}")
+        unknown = sorted(set(self.init) - set(InitConfig.__dataclass_fields__))
+        if unknown:
+            raise ConfigError(f"grasp type {self.name!r}: unknown init field(s) {unknown}",
+                              f"known: {sorted(InitConfig.__dataclass_fields__)}")
+
+    def role(self, name: str) -> str | None:
+        """``"pull"``, ``"candidate"`` or None (the role takes no part)."""
+        return dict(self.contacts).get(name)
+
+    @property
+    def extra_contacts(self) -> bool:
+        return bool(self.contacts)
+
+    def apply_init(self, init):
+        """The task's `InitConfig` with this type's fields over it."""
+        if not self.init:
+            return init
+        return type(init).from_dict({**init.to_dict(), **dict(self.init)}, f"grasp type {self.name!r}: init")
+
+
+@dataclass(frozen=True)
+class GraspBand(Config):
+    """The grasp types of objects up to one size: ``mix`` maps type names (or YAML paths) to
+    shares (summing to 1)."""
+
+    max_scale_m: float | None = None  #: objects of at most this scale (m); None: every larger one
+    mix: Mapping[str, float] = field(default_factory=lambda: {"precision": 1.0})  #: type name -> share of the grasps
+
+    def __post_init__(self):
+        if self.max_scale_m is not None and not (math.isfinite(self.max_scale_m) and self.max_scale_m > 0):
+            raise ConfigError(f"grasp_types: max_scale_m must be a positive number of metres or null, got {self.max_scale_m}")
+        shares = dict(self.mix)
+        if not shares or any(not (math.isfinite(v) and v >= 0) for v in shares.values()) \
+                or abs(sum(shares.values()) - 1.0) > 1e-6:
+            raise ConfigError(f"grasp_types: mix must map grasp types to shares >= 0 summing to 1, got {shares}")
+
+
+@dataclass(frozen=True)
+class GraspMix(Config):
+    """Which grasp types a force-closure task's grasps get, by object size (the recipe's
+    ``grasp_types``): the first band whose ``max_scale_m`` holds the object's scale applies, and
+    its ``mix`` splits each object's grasps between types (largest remainder, in the mix's order)."""
+
+    bands: tuple[GraspBand, ...] = (GraspBand(),)  #: by increasing max_scale_m, the last one open (null)
+
+    def __post_init__(self):
+        if not self.bands or self.bands[-1].max_scale_m is not None:
+            raise ConfigError("grasp_types.bands must end with a band without max_scale_m (every larger object)")
+        sizes = [b.max_scale_m for b in self.bands[:-1]]
+        if any(s is None for s in sizes) or sizes != sorted(sizes) or len(set(sizes)) != len(sizes):
+            raise ConfigError(f"grasp_types.bands: max_scale_m must increase, got {sizes}")
+        for b in self.bands:
+            for name in b.mix:
+                load_grasp_type(name)  # an unknown type is refused here, naming it
+
+    @classmethod
+    def single(cls, name: str) -> "GraspMix":
+        """Every grasp of one type."""
+        return cls(bands=(GraspBand(mix={name: 1.0}),))
+
+    def types(self) -> list[str]:
+        """Every grasp type the bands use (share > 0), in order of first use."""
+        out: list[str] = []
+        for b in self.bands:
+            out += [k for k, v in b.mix.items() if v > 0 and k not in out]
+        return out
+
+    def counts(self, scale: float, n: int) -> dict[str, int]:
+        """Grasps of each type (share > 0) for ``n`` grasps on an object of ``scale`` m."""
+        band = next(b for b in self.bands if b.max_scale_m is None or scale <= b.max_scale_m + 1e-9)
+        mix = [(k, v) for k, v in band.mix.items() if v > 0]
+        raw = [v * n for _, v in mix]
+        out = [int(math.floor(x)) for x in raw]
+        order = sorted(range(len(mix)), key=lambda i: (-(raw[i] - out[i]), i))
+        for i in order[:n - sum(out)]:
+            out[i] += 1
+        return {k: c for (k, _), c in zip(mix, out) if c > 0}
+
+
+def builtin_grasp_types() -> list[str]:
+    """Names of the built-in grasp types (``datagen/tasks/grasp_types/*.yaml``)."""
+    return sorted(p.stem for p in GRASP_TYPE_DIR.glob("*.yaml"))
+
+
+def load_grasp_type(name_or_path: str | Path) -> GraspType:
+    """A built-in grasp type by name (``precision``, ``power``) or a YAML file."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = GRASP_TYPE_DIR / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"unknown grasp type {name_or_path!r}",
+                              f"built-in grasp types: {builtin_grasp_types()}, or pass a YAML file")
+    if not path.is_file():
+        raise ConfigError(f"grasp type file {path} does not exist")
+    return GraspType.from_yaml(path)

@@ -1,0 +1,63 @@
+"""Grasp types as data: the built-in YAMLs, their validation, and the per-size mix."""
+
+import pytest
+
+from datagen.errors import ConfigError
+from datagen.tasks import GraspMix, GraspType, builtin_grasp_types, load_grasp_type
+
+
+def test_builtin_grasp_types_load_and_name_their_contacts():
+    assert {"precision", "power"} <= set(builtin_grasp_types())
+    assert not load_grasp_type("precision").extra_contacts
+    power = load_grasp_type("power")
+    assert power.role("palm") == "pull" and power.role("phalanges") in ("pull", "candidate")
+
+
+@pytest.mark.parametrize("data, match", [
+    ({"name": "x", "contacts": {"wrist": "pull"}}, "unknown contact role 'wrist'"),
+    ({"name": "x", "contacts": {"palm": "press"}}, "contacts.palm must be one of"),
+    ({"name": "x", "init": {"distance": [0, 1]}}, "unknown init field"),
+    ({"name": "task"}, "reserved"),
+    ({"name": "a b"}, "simple identifier"),
+    ({"name": "x", "synth": {}}, "synth"),
+])
+def test_bad_grasp_type_is_named(data, match):
+    with pytest.raises(ConfigError, match=match):
+        GraspType.from_dict(data)
+
+
+def test_grasp_type_yaml_file_and_unknown_name(tmp_path):
+    p = tmp_path / "wrap.yaml"
+    p.write_text("name: wrap\ncontacts: {palm: pull, phalanges: pull}\ninit: {distance_m: [0.01, 0.02]}\n")
+    t = load_grasp_type(p)
+    assert t.name == "wrap" and t.role("phalanges") == "pull"
+    from datagen.tasks import load_task
+
+    init = t.apply_init(load_task("force_closure").init)
+    assert init.distance_m == (0.01, 0.02) and init.kind == "surround"
+    with pytest.raises(ConfigError, match="unknown grasp type 'pwr'"):
+        load_grasp_type("pwr")
+
+
+def test_mix_counts_by_size_and_share():
+    mix = GraspMix.from_dict({"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1}},
+                                        {"mix": {"power": 0.5, "precision": 0.5}}]})
+    assert mix.counts(0.06, 4) == {"precision": 4}
+    assert mix.counts(0.09, 4) == {"precision": 4}  # the band's bound is inclusive
+    assert mix.counts(0.12, 4) == {"power": 2, "precision": 2}
+    assert mix.counts(0.12, 3) == {"power": 2, "precision": 1}  # largest remainder, ties in the mix's order
+    assert mix.counts(0.12, 1) == {"power": 1}
+    assert mix.types() == ["precision", "power"]
+    assert GraspMix.single("power").counts(0.06, 5) == {"power": 5}
+    assert GraspMix.from_dict(mix.to_dict()) == mix
+
+
+@pytest.mark.parametrize("bands, match", [
+    ([{"max_scale_m": 0.1, "mix": {"precision": 1}}], "must end with a band without max_scale_m"),
+    ([{"max_scale_m": 0.1}, {"max_scale_m": 0.08}, {}], "must increase"),
+    ([{"mix": {"precision": 0.5}}], "summing to 1"),
+    ([{"mix": {"hook": 1}}], "unknown grasp type 'hook'"),
+])
+def test_bad_mix_is_named(bands, match):
+    with pytest.raises(ConfigError, match=match):
+        GraspMix.from_dict({"bands": bands})
