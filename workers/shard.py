@@ -30,7 +30,7 @@ from datagen.io import integrity
 from datagen.pipeline import failure
 from schemas import arrow_schema
 
-from .job import JobConfig, JobDir, JobIOError, _errno_of, writing
+from .job import JobConfig, JobDir, JobError, JobIOError, _errno_of, writing
 
 __all__ = ["run_shard", "write_table_atomic", "shard_seed"]
 
@@ -130,6 +130,22 @@ def run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, pr
             os.environ["DATAGEN_CACHE"] = before
 
 
+def same_recipes(job: JobDir, recipes: list) -> list:
+    """``recipes`` (this worker's code resolving the job's config), checked against the resolved
+    recipes job.json recorded when the job started: a worker whose code resolves them differently
+    (code edited mid-job, a cluster node on another version) would write rows the job does not
+    describe, so it stops the shard with `JobError` naming both."""
+    recorded = job.read_job().get("recipes")
+    mine = json.loads(json.dumps([r.to_dict() for r in recipes]))
+    if recorded is not None and recorded != mine:
+        diff = sorted(f"{t}.{k}" for t, (a, b) in enumerate(zip(recorded, mine))
+                      for k in set(a) | set(b) if a.get(k) != b.get(k))
+        raise JobError(f"job {job.path}: this worker's code resolves the job's settings differently from "
+                       f"job.json's recipes (differing: {', '.join(diff) or 'the task list'})",
+                       "run every node on the code version that started the job (job.json `code_version`)")
+    return recipes
+
+
 def _node_id() -> str:
     """The Ray node this shard runs on ("" outside Ray): `datagen status` shows where shards ran."""
     try:
@@ -183,7 +199,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     t_start, cpu_start, started = time.perf_counter(), time.process_time(), time.time()
     job = JobDir(job_path)
     cfg = JobConfig.from_dict(cfg_dict)
-    recipes = cfg.recipes()
+    recipes = same_recipes(job, cfg.recipes())
     pcfg = recipes[0].process  # the tasks share the objects' processing
     torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
     device = "cuda" if torch.cuda.is_available() else "cpu"

@@ -139,3 +139,18 @@ def test_grasp_types_are_a_recipe_layer_of_the_job(tmp_path):
     register_run(ap.add_subparsers(dest="cmd"))
     args = ap.parse_args(["run", "--out", str(tmp_path / "j"), "--grasp-type", "power"])
     assert _config(args).recipes()[0].grasp_types == GraspMix.single("power")
+
+
+def test_a_worker_that_resolves_the_settings_differently_stops_its_shard(tmp_path):
+    """A shard worker's code resolves the job's recipes again; if they are not job.json's (code
+    edited mid-job, a node on another version), the shard stops naming what differs instead of
+    writing rows the job does not describe."""
+    from workers.shard import same_recipes
+
+    job = JobDir(tmp_path / "job")
+    cfg = tiny_config("procedural")
+    job.init(cfg)
+    assert same_recipes(job, cfg.recipes()) == cfg.recipes()
+    other = JobConfig(**{**cfg.to_dict(), "synth": {**cfg.synth, "iters": 11}})  # as another code's resolver
+    with pytest.raises(JobError, match=r"resolves the job's settings differently.*0\.synth"):
+        same_recipes(job, other.recipes())
