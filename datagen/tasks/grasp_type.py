@@ -27,6 +27,7 @@ from typing import Any, Mapping
 
 from datagen.config import Config
 from datagen.errors import ConfigError
+from datagen.tasks.spec import builtin_names, builtin_or_file
 
 __all__ = ["CONTACT_MODES", "CONTACT_ROLES", "GRASP_TYPE_DIR", "TASK_GRASP_TYPE", "GraspBand", "GraspMix",
            "GraspType", "builtin_grasp_types", "load_grasp_type"]
@@ -141,17 +142,9 @@ class GraspMix(Config):
 
 def builtin_grasp_types() -> list[str]:
     """Names of the built-in grasp types (``datagen/tasks/grasp_types/*.yaml``)."""
-    return sorted(p.stem for p in GRASP_TYPE_DIR.glob("*.yaml"))
+    return builtin_names(GRASP_TYPE_DIR)
 
 
 def load_grasp_type(name_or_path: str | Path) -> GraspType:
     """A built-in grasp type by name (``precision``, ``power``) or a YAML file."""
-    path = Path(name_or_path)
-    if not path.suffix:
-        path = GRASP_TYPE_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"unknown grasp type {name_or_path!r}",
-                              f"built-in grasp types: {builtin_grasp_types()}, or pass a YAML file")
-    if not path.is_file():
-        raise ConfigError(f"grasp type file {path} does not exist")
-    return GraspType.from_yaml(path)
+    return GraspType.from_yaml(builtin_or_file(name_or_path, GRASP_TYPE_DIR, "grasp type"))

@@ -128,18 +128,30 @@ class TaskSpec(Config):
         return replace(self, init=init, fingers=o.fingers if o.fingers is not None else self.fingers, hands={})
 
 
+def builtin_names(directory: Path) -> list[str]:
+    """Names of the built-in YAML files in ``directory`` (tasks, grasp types)."""
+    return sorted(p.stem for p in directory.glob("*.yaml"))
+
+
+def builtin_or_file(name_or_path: str | Path, directory: Path, kind: str) -> Path:
+    """The YAML file of a built-in ``kind`` ("task", "grasp type") by name, or a user's file by
+    path; `ConfigError` naming it (with the built-in names) when there is none."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = directory / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"unknown {kind} {name_or_path!r}",
+                              f"built-in {kind}s: {builtin_names(directory)}, or pass a YAML file")
+    if not path.is_file():
+        raise ConfigError(f"{kind} file {path} does not exist")
+    return path
+
+
 def builtin_tasks() -> list[str]:
     """Names of the built-in tasks (``datagen/tasks/specs/*.yaml``)."""
-    return sorted(p.stem for p in SPEC_DIR.glob("*.yaml"))
+    return builtin_names(SPEC_DIR)
 
 
 def load_task(name_or_path: str | Path) -> TaskSpec:
     """A built-in task by name (``force_closure``, ...) or a YAML task file."""
-    path = Path(name_or_path)
-    if not path.suffix:
-        path = SPEC_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"unknown task {name_or_path!r}", f"built-in tasks: {builtin_tasks()}, or pass a YAML file")
-    if not path.is_file():
-        raise ConfigError(f"task file {path} does not exist")
-    return TaskSpec.from_yaml(path)
+    return TaskSpec.from_yaml(builtin_or_file(name_or_path, SPEC_DIR, "task"))
