@@ -192,6 +192,20 @@ def _servo_armature(model: mujoco.MjModel, kp: float) -> dict[int, float]:
     return out
 
 
+def _read_spec(source: Path) -> "mujoco.MjSpec":
+    """MuJoCo's spec of the MJCF or URDF file ``source``; `HandSpecError` naming it when MuJoCo
+    cannot read it."""
+    try:
+        if source.suffix.lower() == ".urdf":
+            return mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
+        return mujoco.MjSpec.from_file(str(source))
+    except HandSpecError:
+        raise
+    except Exception as exc:
+        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
+                            "check the file and the files it includes") from None
+
+
 def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_kp: float = 5.0,
                  write: bool = True) -> FlatHand:
     """Flatten ``source`` (MJCF or URDF) to the hand under ``root_body`` (see module docstring).
@@ -201,16 +215,7 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
     joints the armature that keeps such a servo stable (`_servo_armature`).
     """
     source = Path(source).resolve()
-    try:
-        if source.suffix.lower() == ".urdf":
-            spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
-        else:
-            spec = mujoco.MjSpec.from_file(str(source))
-    except HandSpecError:
-        raise
-    except Exception as exc:
-        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
-                            "check the file and the files it includes") from None
+    spec = _read_spec(source)
     undo_registry_edits(spec, source)  # a registry copy of a Menagerie hand -> Menagerie's model
     base = source.parent
     for attr in ("meshdir", "texturedir"):
@@ -383,22 +388,11 @@ def detect_couplings(model: mujoco.MjModel, max_slack: float = 0.2) -> list[Coup
     return out
 
 
-
-
 def top_level_bodies(source: Path) -> list[tuple[str, int]]:
     """(name, joints below it) of each top-level body of the MJCF/URDF ``source`` (the hand is
     usually the one with the most joints; a table, a floor or an object has few or none)."""
     source = Path(source).resolve()
-    try:
-        if source.suffix.lower() == ".urdf":
-            spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(source))
-        else:
-            spec = mujoco.MjSpec.from_file(str(source))
-    except HandSpecError:
-        raise
-    except Exception as exc:
-        raise HandSpecError(source, f"MuJoCo cannot read the hand: {str(exc).strip()}",
-                            "check the file and the files it includes") from None
+    spec = _read_spec(source)
 
     def joints(body) -> int:
         return len([j for j in body.joints if j.type != mujoco.mjtJoint.mjJNT_FREE]) + sum(joints(b) for b in body.bodies)
