@@ -209,7 +209,7 @@ def _verify(args) -> int:
         print(f"datagen verify: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(v, indent=1) if args.json else format_verify(v))
-    return 1 if v["problems"] else 0
+    return 1 if v["problems"] or v["manifest"] else 0
 
 
 def register_report(sub: argparse._SubParsersAction) -> None:

@@ -38,7 +38,7 @@ from datagen.config import Config, check_types
 from datagen.errors import ConfigError, DatagenError
 from datagen.pipeline.recipe import DEFAULT_PRESET, resolve
 from datagen.io.layout import (FAILURES, FAILURES_DIR, JOB_JSON, LEDGER_DIR, LOCK, MANIFEST, MANIFEST_FAILURES,
-                               OBJECTS_DIR, OBSERVATIONS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
+                               MANIFEST_RECORD, OBJECTS_DIR, OBSERVATIONS_DIR, PROGRESS_DIR, SHARD_NAME, SHARDS_DIR)
 
 __all__ = ["AUTO", "EXECUTION_FIELDS", "JobConfig", "JobDir", "JobError", "JobIOError", "code_version",
            "package_versions", "shard_size", "shard_slices", "writing"]
@@ -371,6 +371,10 @@ class JobDir:
     @property
     def manifest_path(self) -> Path:
         return self.path / MANIFEST
+
+    @property
+    def manifest_record_path(self) -> Path:
+        return self.path / LEDGER_DIR / MANIFEST_RECORD
 
     @property
     def failures_path(self) -> Path:

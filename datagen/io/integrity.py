@@ -37,8 +37,8 @@ from datagen.errors import DatagenError
 
 from . import layout
 
-__all__ = ["Audit", "ShardError", "WRITE_OPTIONS", "audit", "check_file", "file_record", "observations_file",
-           "read_ledger", "read_parquet", "sha256_of"]
+__all__ = ["Audit", "ShardError", "WRITE_OPTIONS", "audit", "check_file", "check_text", "file_record",
+           "observations_file", "read_ledger", "read_parquet", "sha256_of", "text_record"]
 
 #: keyword arguments of every ``pq.write_table`` of a job's files: CRC32 page checksums
 WRITE_OPTIONS = {"write_page_checksum": True}
@@ -99,6 +99,38 @@ def check_file(path: Path, record: dict, deep: bool) -> str | None:
             return f"cannot be read ({exc.strerror})"
         if sha != record.get("sha256"):
             return f"sha256 {sha[:12]}... != the ledger's {str(record.get('sha256'))[:12]}...: its bytes changed"
+    return None
+
+
+def text_record(text: str) -> dict:
+    """``{"bytes", "lines", "sha256"}`` of a text file's content (UTF-8), as `check_text` checks it."""
+    data = text.encode()
+    return {"bytes": len(data), "lines": data.count(b"\n"), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def check_text(path: Path, record: dict) -> str | None:
+    """Why the text file ``path`` does not match ``record`` (`text_record`), or None: missing,
+    another size, another line count, another sha256. Bounded: a file larger than the record
+    says is not read."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        return f"missing (the ledger recorded {record.get('lines', '?')} lines, {record.get('bytes', '?')} bytes)"
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    if size != record.get("bytes"):
+        kind = "truncated" if isinstance(record.get("bytes"), int) and size < record["bytes"] else "changed size"
+        return f"{kind}: {size} bytes, the ledger recorded {record.get('bytes')}"
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    lines = data.count(b"\n")
+    if lines != record.get("lines"):
+        return f"{lines} lines, the ledger recorded {record.get('lines')}"
+    sha = hashlib.sha256(data).hexdigest()
+    if sha != record.get("sha256"):
+        return f"sha256 {sha[:12]}... != the ledger's {str(record.get('sha256'))[:12]}...: its bytes changed"
     return None
 
 

@@ -10,6 +10,7 @@
     objects/<entry>/             processed objects; rows' ``object_path`` is relative to the job dir
     failures/manifest.parquet    objects of the source that the manifest cannot hold (stage ``manifest``)
     ledger/part-NNNNN.json       present once shard N is finished (its counts, timings and files)
+    ledger/manifest.json         manifest.jsonl's size, line count and sha256, written with it
     progress/part-NNNNN.json     a running shard's progress (polled by the driver)
     .lock                        flock held by the running driver
     hands/<name>.yaml            the job's hand, pinned (`datagen.hands.pin.HANDS_DIR`): rows' ``hand``
@@ -24,6 +25,7 @@ FAILURES_DIR = "failures"
 FAILURES = "failures.parquet"
 OBJECTS_DIR = "objects"
 LEDGER_DIR = "ledger"
+MANIFEST_RECORD = "manifest.json"  # in LEDGER_DIR
 LOCK = ".lock"
 PROGRESS_DIR = "progress"
 MANIFEST_FAILURES = "manifest.parquet"

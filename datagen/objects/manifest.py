@@ -167,11 +167,16 @@ def build_manifest(source: str, count: int | None, scales: Iterable[float] = DEF
     return out
 
 
+def manifest_text(entries: Iterable[ManifestEntry]) -> str:
+    """The JSON Lines text `write_manifest` writes (one entry per line)."""
+    return "".join(e.to_json() + "\n" for e in entries)
+
+
 def write_manifest(entries: Iterable[ManifestEntry], path: str | Path) -> Path:
     """Write atomically (`datagen._atomic`: a temp file renamed into place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, "".join(e.to_json() + "\n" for e in entries))
+    atomic_write_text(path, manifest_text(entries))
     return path
 
 

@@ -213,6 +213,8 @@ COMMANDS = {
     "`run --num-cpus -1`": lambda t, c, m: _run(t, c, "--num-cpus", "-1"),
     "`eval` of a row whose `object_path` is `/etc`": lambda t, c, m: _eval_outside(t, c),
     "a shard with one flipped bit": lambda t, c, m: _damaged(t, c, _flip, "verify"),
+    "an edited `manifest.jsonl`": lambda t, c, m: _damaged(
+        t, c, lambda j: j.manifest_path.write_text(j.manifest_path.read_text().replace("train", "TRAIN", 1)), "verify"),
     "a deleted shard": lambda t, c, m: _damaged(t, c, lambda j: j.shard_path(0).unlink(), "status"),
     "a truncated shard": lambda t, c, m: _damaged(t, c, lambda j: _truncate(j.shard_path(0)), "status"),
     "an empty ledger entry": lambda t, c, m: _damaged(t, c, lambda j: j.ledger_path(0).write_text(""), "status"),

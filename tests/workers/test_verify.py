@@ -122,6 +122,33 @@ def test_a_truncated_job_json_is_named_and_rewritten_by_a_matching_config(job, m
     assert "job.json: the job file is empty" in capsys.readouterr().err
 
 
+def test_a_changed_manifest_is_named_by_verify_and_built_again_on_resume(job, mesh_source, capsys):
+    from workers.setup import prepare_manifest
+
+    text = job.manifest_path.read_text()
+    record = json.loads((job.path / "ledger" / "manifest.json").read_text())
+    assert record["bytes"] == len(text.encode()) and record["lines"] == 3  # three objects
+    edited = text.replace('"split": "train"', '"split": "test"', 1)
+    assert edited != text and len(edited) == len(text) - 1
+    job.manifest_path.write_text(edited + " ")  # the same size, another object split: silent before
+    assert cli.main(["verify", str(job.path)]) == 1
+    out = capsys.readouterr().out
+    assert "  manifest.jsonl: sha256 " in out and "its bytes changed" in out, out
+    assert "builds the manifest again from the job's source" in out
+    entries = prepare_manifest(job, tiny_config(mesh_source))  # what a resume does
+    assert "manifest.jsonl sha256 " in capsys.readouterr().err
+    assert job.manifest_path.read_text() == text and [e.id for e in entries] == ["a_box.obj", "b_ball.obj",
+                                                                                "c_bad.obj"]
+    assert cli.main(["verify", str(job.path)]) == 0
+    job.manifest_path.unlink()  # deleted: built again too
+    prepare_manifest(job, tiny_config(mesh_source))
+    assert job.manifest_path.read_text() == text
+    job.manifest_path.write_text(edited + " ")
+    with pytest.raises(JobError, match=r"manifest.jsonl sha256 .*its bytes changed, and the job's source does not "
+                                       r"give it again: .*restore it from a copy"):
+        prepare_manifest(job, tiny_config(mesh_source, count=2))  # a source that now holds other objects
+
+
 @pytest.mark.ray
 @pytest.mark.slow
 def test_a_rerun_redoes_exactly_the_damaged_shards(job, pristine, mesh_source, cache_dir):
