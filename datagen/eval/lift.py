@@ -31,7 +31,7 @@ from .hold import DirectionResult, close_hand, initial_state
 from .metrics import set_static_pose
 from .scene import Scene
 
-__all__ = ["LIFT_TEST", "LiftResult", "lift", "lift_reason", "table_depth"]
+__all__ = ["LIFT_TEST", "LiftResult", "lift", "lift_reason", "table_depth", "table_normal"]
 
 LIFT_TEST = "tabletop_lift"
 
@@ -46,6 +46,15 @@ class LiftResult:
     max_rise_m: float
     end_rise_m: float
     steps: int
+
+
+def table_normal(scene: Scene) -> np.ndarray | None:
+    """(3,) the table's up direction in the scene (object) frame; None without a table."""
+    if len(scene.table_geoms) == 0:
+        return None
+    z = np.zeros(3)
+    mujoco.mju_rotVecQuat(z, np.array([0.0, 0.0, 1.0]), scene.model.geom_quat[int(scene.table_geoms[0])])
+    return z
 
 
 def table_depth(scene: Scene, data: mujoco.MjData, row: np.ndarray, distmax: float = 0.01) -> float:
