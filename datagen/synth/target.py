@@ -19,7 +19,8 @@ __all__ = ["GraspTarget"]
 
 @dataclass
 class GraspTarget:
-    """One object at one scale, in its own frame (origin at its bounding-box centre).
+    """One object at one scale, in its own frame (origin at its bounding-box centre), floating or
+    resting on a table in one stable pose (`on_table`; the table is ``support_plane`` there).
 
     ``sdf`` holds the surface in normalized units; ``scale`` is metres per unit. ``hull_points``
     ``(H, 3)`` metres and ``hull_normals`` ``(H, 3)`` outward unit sample the convex hull for
