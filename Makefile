@@ -146,7 +146,7 @@ test-view: $(STAMP) browser
 # manifests/real_dev.jsonl -> benchmarks/results/quality.md. The meshes come from registry
 # packages (pybullet_data; metaworld's assets and MyoSuite's simhive objects, both installed without
 # their dependencies: only their mesh files are read). manifests/real_holdout.jsonl: the held-out set.
-.PHONY: real-objects bench-quality
+.PHONY: real-objects bench-quality bench-tabletop
 BENCH_QUALITY_ARGS ?=
 real-objects: $(STAMP)
 	$(PY) -m pip install --quiet pybullet==3.2.7
@@ -155,6 +155,9 @@ real-objects: $(STAMP)
 
 bench-quality: $(STAMP) hands real-objects
 	$(PY) -m benchmarks.bench_quality $(BENCH_QUALITY_ARGS)
+
+bench-tabletop: $(STAMP) hands real-objects
+	$(PY) -m benchmarks.bench_tabletop --work $(or $(WORK),/tmp/datagen-bench-tabletop) $(BENCH_TABLETOP_ARGS)
 
 # `datagen synth --num 100 --iters 500` end to end on pybullet_data meshes, by seeds per grasp,
 # with the success rate each buys -> benchmarks/results/synth_cli.md

@@ -51,11 +51,12 @@ def export(job: Path, out: Path) -> dict[str, str]:
             for p in sorted(gd.rglob("*.npy"))}
 
 
-def run_peer(peer: Path, python: str, hand: str, save_root: Path, workers: int) -> float:
-    """DexGraspBench's evaluation of ``save_root/datagen_<hand>/graspdata``; wall seconds."""
+def run_peer(peer: Path, python: str, hand: str, save_root: Path, workers: int, setting: str = "fc") -> float:
+    """DexGraspBench's evaluation of ``save_root/datagen_<hand>/graspdata`` in its ``setting`` (``fc``
+    six directions, ``tabletop`` the lift); wall seconds."""
     t0 = time.perf_counter()
     subprocess.run([python, "src/main.py", f"hand={hand}", "task=eval", "exp_name=datagen",
-                    f"save_root={save_root}", f"n_worker={workers}"], check=True, cwd=peer)
+                    f"save_root={save_root}", f"n_worker={workers}", f"setting={setting}"], check=True, cwd=peer)
     return time.perf_counter() - t0
 
 

@@ -97,6 +97,10 @@ def _config(args):
         data["preset"] = flags["preset"]
     if "grasp_types" in flags:
         data["grasp_types"] = flags["grasp_types"]
+    if "scene" in flags:  # --scene / --stable-poses over the config's scene (a name or a mapping)
+        base = data.get("scene")
+        base = {"kind": base} if isinstance(base, str) else dict(base or {})
+        data["scene"] = {**base, **flags["scene"]}
     if "synth" in flags:
         if data.get("synth") is not None and not isinstance(data["synth"], dict):
             raise JobError(f"{args.config}: synth must be a mapping of SynthConfig fields")

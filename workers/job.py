@@ -94,7 +94,7 @@ def writing(path: str | Path, what: str = "the job file"):
 EXECUTION_FIELDS = ("object_timeout_s", "cpus_per_shard", "gpus_per_shard")
 # fields that are layers of the recipes: hashed through the resolved recipes they give (a job made
 # with the preset's values spelled out is the same job)
-RECIPE_FIELDS = ("preset", "synth", "eval", "process", "grasp_types", "grid_resolution")
+RECIPE_FIELDS = ("preset", "synth", "eval", "process", "grasp_types", "grid_resolution", "scene")
 MAX_SEED = 2**62                        # shard k uses seed + k; int64 columns hold it
 MAX_GRASPS_PER_OBJECT = 10_000
 AUTO = "auto"                           # objects_per_shard chosen at the job's creation (`shard_size`)
@@ -138,6 +138,8 @@ class JobConfig(Config):
                                         #: type's name; None: the preset's)
     grid_resolution: int | None = None  #: synthesis SDF grid nodes per axis, 8 to 256 (None: the preset's;
                                         #: 64: ~25 s/object on one core, 48: ~10 s, 32: ~3 s)
+    scene: dict[str, Any] | str | None = None  #: floating or tabletop (a scene's name, or kind and
+                                        #: stable_poses; None: the preset's, floating; docs/scenes.md)
     # what a learner sees of each object and scale, beside the shards (observations/part-NNNNN.parquet;
     # datagen.objects.observations; cost: docs/learning.md): surface points and normals by default
     observations: ObservationConfig = field(default_factory=ObservationConfig)  #: ObservationConfig fields
@@ -188,7 +190,7 @@ class JobConfig(Config):
         """The resolved `datagen.pipeline.Recipe` of each task, in ``tasks`` order (they share the
         process config and grid: the objects are processed once for all of them)."""
         layer = {"preset": self.preset, "synth": self.synth, "eval": self.eval, "process": self.process,
-                 "grasp_types": self.grasp_types, "grid_resolution": self.grid_resolution}
+                 "grasp_types": self.grasp_types, "grid_resolution": self.grid_resolution, "scene": self.scene}
         return [resolve(self.hand, t, config=layer, where="job config") for t in self.tasks]
 
     def check_runnable(self):

@@ -104,7 +104,7 @@ def _render(args) -> int:
 
     from .render import render_grasp
     from .scene import build_scene
-    from .table import read_grasps, row_pieces, row_poses, table_base
+    from .table import read_grasps, row_pieces, row_poses, row_table, table_base
 
     cfg = _load_config(args.config, None)
     table = read_grasps(args.grasps)
@@ -118,8 +118,9 @@ def _render(args) -> int:
         row = table.slice(i, 1).to_pylist()[0]
         name = str(row["hand"])
         hands.setdefault(name, load_hand(name, base=base))
-        test = cfg.task_test(str(row["task"]))
-        scene = build_scene(hands[name], row_pieces(row, base), cfg, test)
+        table_plane = row_table(row)  # a tabletop row: its table, the lift (no task test)
+        test = None if table_plane is not None else cfg.task_test(str(row["task"]))
+        scene = build_scene(hands[name], row_pieces(row, base), cfg, test, table=table_plane)
         path = render_grasp(scene, row_poses(row), cfg, Path(args.out) / f"grasp_{i:06d}_{row['object_id']}.png",
                             width=args.width, height=args.height)
         print(path)

@@ -111,6 +111,10 @@ class EvalConfig(Config):
     settle_checks: int = 3
     settle_safety: float = 12.0                      # the creep's margin per check left (above)
     threads: int = 1                               # >1: directions stepped by a thread pool
+    # --- tabletop (a row resting on a table: DexGraspBench's `tabletop` setting, datagen/eval/lift.py;
+    # the force is force_per_kg x mass down the table normal, the thresholds the ones above) ---
+    lift_m: float = 0.1                            # the hand rises this far after the squeeze, m (the peer's)
+    max_table_penetration_m: float = 0.001         # deeper hand-table contact at the pregrasp or grasp: hand_in_table
     # --- rejections before simulating and static metrics at the grasp pose ---
     max_pregrasp_penetration_m: float = 0.01       # deeper hand-object contact at the pregrasp: rejected
     # A hand link "touches" within touch_distance_m of the object at the grasp pose; fewer than
@@ -143,7 +147,8 @@ class EvalConfig(Config):
         _check(len(self.friction) == 2 and min(self.friction) >= 0, f"{c}.friction", "two values >= 0")
         _check(len(self.hand_solimp) == 3 and len(self.hand_solref) == 2, f"{c}.hand_solimp/solref", "3 and 2 values")
         for name in ("actuator_kp", "actuator_force_limit", "actuator_time_constant_s", "object_mass_kg",
-                     "force_per_kg", "max_translation_m", "max_rotation_deg", "max_pregrasp_penetration_m", "touch_distance_m"):
+                     "force_per_kg", "max_translation_m", "max_rotation_deg", "max_pregrasp_penetration_m", "touch_distance_m",
+                     "lift_m", "max_table_penetration_m"):
             _check(getattr(self, name) > 0, f"{c}.{name}", f"must be > 0, got {getattr(self, name)}")
         _check(self.contact_distance_m >= self.touch_distance_m, f"{c}.contact_distance_m",
                "must be >= touch_distance_m")

@@ -13,6 +13,12 @@ Order of decisions (the first that applies is the reason):
    initial pose (the public protocol), or for a task test with ``measure_from: closed`` from its
    pose once the hand has closed (the paper's task test: hand fixed, object unmoved under -w_t).
 
+A tabletop row (its support plane passed as ``table``) takes the lift test of `datagen.eval.lift`
+instead of the six directions (test ``tabletop_lift``): after ``penetration``, ``hand_in_table``
+(a hand geom deeper than ``max_table_penetration_m`` in the table at the pregrasp or the grasp),
+then ``no_contact``, then the lift's own codes (``object_left_on_table``, ``object_dropped``,
+``object_slipped``, ``unstable``).
+
 Metrics are computed for every grasp (also rejected ones) at the grasp pose: penetration,
 self penetration, per-finger contact distance, and the epsilon metric
 (`datagen.wrench.epsilon_metric`, contacts within ``contact_distance_m``, mu = friction).
@@ -41,6 +47,7 @@ from datagen.wrench import EpsilonSearch, epsilon_metric
 
 from .config import DIRECTION_NAMES, DIRECTIONS, EvalConfig, EvalError, TaskTest
 from .hold import DirectionResult, close_hand, hold, initial_state
+from .lift import LIFT_TEST, lift, lift_reason, table_depth
 from .metrics import StaticMetrics, static_metrics
 from .scene import ObjectPieces, Scene, build_scene
 
@@ -65,6 +72,10 @@ class Reason(str, enum.Enum):
     NO_CONTACT = "no_contact"
     UNSTABLE = "unstable"
     SLIPPED_TASK = "slipped_task"
+    HAND_IN_TABLE = "hand_in_table"
+    OBJECT_LEFT_ON_TABLE = "object_left_on_table"
+    OBJECT_DROPPED = "object_dropped"
+    OBJECT_SLIPPED = "object_slipped"
 
     @staticmethod
     def slipped(direction: str) -> str:
@@ -96,6 +107,7 @@ class GraspResult:
     num_contacts: int
     epsilon: float
     sim_steps: int
+    table_penetration_m: float = math.nan  # tabletop: the hand's depth in the table (pregrasp and grasp); NaN: no table
 
 
 @dataclass(frozen=True)
@@ -162,14 +174,18 @@ class Evaluator:
         self.close()
 
     # ------------------------------------------------------------------ scenes
-    def scene(self, pieces: ObjectPieces, task: TaskTest | None = None) -> tuple[Scene, list[mujoco.MjData]]:
-        """The cached scene of ``pieces`` (object joint from ``task``) and its scratch MjData."""
+    def scene(self, pieces: ObjectPieces, task: TaskTest | None = None,
+              table: tuple | None = None) -> tuple[Scene, list[mujoco.MjData]]:
+        """The cached scene of ``pieces`` (object joint from ``task``; ``table``: a support plane
+        ``[n, d]``, None: none) and its scratch MjData."""
         joint = None if task is None or task.joint == "free" else (task.joint, task.axis, task.anchor, task.limits)
         key = (pieces.paths, pieces.volumes, pieces.scale, joint, () if task is None else task.scenery)
+        if table is not None:
+            key += (table,)
         if key in self._scenes:
             self._scenes.move_to_end(key)
             return self._scenes[key]
-        scene = build_scene(self.hand, pieces, self.cfg, task)
+        scene = build_scene(self.hand, pieces, self.cfg, task, table=table)
         log.debug("scene of %s: %d pieces at scale %.3f m, joint %s (%d scenes cached)",
                   pieces.object_id, len(pieces.paths), pieces.scale, joint[0] if joint else "free", len(self._scenes) + 1)
         datas = [mujoco.MjData(scene.model) for _ in range(len(DIRECTIONS) + 2)]
@@ -201,7 +217,7 @@ class Evaluator:
             return float(epsilon_metric(p, n, mu, search=self._search))
 
     def evaluate(self, pieces: ObjectPieces, poses: np.ndarray, task: str = "force_closure",
-                 w_t=None) -> GraspResult:
+                 w_t=None, table=None) -> GraspResult:
         """Evaluate one grasp.
 
         Args:
@@ -211,8 +227,34 @@ class Evaluator:
             task: a hold task (six directions) or a task of ``cfg.tasks``.
             w_t: (6,) the row's task wrench; for a task test it replaces the configured ``w_t``
                 (the joint, axis and scaling stay the config's). Ignored for hold tasks.
+            table: (4,) the row's support plane ``[n, d]`` (object frame, m) of a tabletop row:
+                the lift test instead of the six directions (a hold task only). None: floating.
         """
+        if table is not None:
+            return self._tabletop(pieces, poses, task, tuple(float(x) for x in table))
         return self._run(pieces, poses, task, w_t, None).result
+
+    def _tabletop(self, pieces: ObjectPieces, poses: np.ndarray, task: str, plane: tuple) -> GraspResult:
+        """The verdict of a tabletop row: the static checks, the hand's depth in the table, the
+        lift (`datagen.eval.lift`)."""
+        cfg = self.cfg
+        test, poses = self._grasp_input(poses, task, None)
+        if test is not None:
+            raise EvalError(f"tabletop grasp of task {task!r}", "its task test has no table",
+                            "tabletop rows are force-closure grasps (the lift test)")
+        scene, datas = self.scene(pieces, None, plane)
+        verdict = _Verdict(self.hand, LIFT_TEST, 1)
+        if not np.all(np.isfinite(poses)) or np.any(np.linalg.norm(poses[:, 3:7], axis=1) < 1e-9):
+            return verdict(Reason.INVALID_GRASP.value)
+        common, rejected = self._static_checks(scene, datas[-1], poses, None)
+        common["table"] = max(table_depth(scene, datas[-1], poses[0]), table_depth(scene, datas[-1], poses[1]))
+        if rejected != Reason.PENETRATION.value and common["table"] > cfg.max_table_penetration_m:
+            rejected = Reason.HAND_IN_TABLE.value
+        if rejected:
+            return verdict(rejected, **common)
+        res = lift(scene, datas[-2], poses, np.asarray(plane[:3]), cfg)
+        reason = lift_reason(res, cfg)
+        return verdict(reason or Reason.OK.value, reason is None, [res.direction], steps=res.steps, **common)
 
     def margin(self, pieces: ObjectPieces, poses: np.ndarray, task: str = "force_closure", w_t=None,
                multiples=MULTIPLES) -> TaskMargin:
@@ -359,7 +401,7 @@ class _Verdict:
 
     def __call__(self, reason: str, success: bool = False, dirs: list[DirectionResult] | None = None,
                  pre: float = math.nan, met: StaticMetrics | None = None, eps: float = math.nan,
-                 steps: int = 0) -> GraspResult:
+                 steps: int = 0, table: float = math.nan) -> GraspResult:
         nan, F = (math.nan,) * self.n_dir, len(self.hand.fingertip_names)
         return GraspResult(
             success=success, reason=reason, test=self.name,
@@ -373,4 +415,4 @@ class _Verdict:
             finger_distance_m=tuple(float(x) for x in met.finger_distance) if met else (math.nan,) * F,
             touching_links=met.touching_links if met else 0,
             num_contacts=len(met.contact_points) if met else 0,
-            epsilon=eps, sim_steps=steps)
+            epsilon=eps, sim_steps=steps, table_penetration_m=table)

@@ -10,6 +10,9 @@ condim, friction and margin; hand geoms get the hand solimp/solref; the hand's p
 get the gains of ``EvalConfig.protocol`` (`datagen.eval.protocol`). A task test's scenery (static
 boxes round a mounted part: door, panel, housing, cabinet) is a static body ``scenery``; its
 contacts with the object are excluded (the part moves inside it), the hand collides with it.
+A tabletop row's table (its ``support_plane`` ``[n, d]`` in the object frame,
+`datagen.objects.tabletop`) is a static plane geom ``table_geom`` through ``-d n`` facing ``n``
+in body ``table``: the object rests on it, the hand collides with it (`datagen.eval.lift`).
 
 Rooting (``EvalConfig.hand_root``): ``"spec"`` attaches the hand from its spec's root body (for
 the Shadow hands: the forearm, its 3-4 kg driven through the two wrist joints by the actuators).
@@ -102,6 +105,7 @@ class Scene:
     hand_geom_link: np.ndarray       # (G,) index into hand.link_names of each hand geom's body
     object_geoms: np.ndarray         # (P,) object geom ids
     scenery_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (E,) static scenery geom ids
+    table_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (0 or 1,) the table's plane geom
     self_pairs: np.ndarray | None = None  # (S, 2) hand geom pairs of the self-penetration metric (lazy)
     # hand_root "palm": the joints of the row the scene simulates (J',) (None: all J), and the
     # kinematics of the palm relative to the row's root (see ``root_target``)
@@ -139,9 +143,11 @@ def _set_contact(geom, cfg: EvalConfig, hand: bool) -> None:
         geom.solref = list(cfg.hand_solref)
 
 
-def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | None = None) -> Scene:
+def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | None = None,
+                table=None) -> Scene:
     """Compile the scene of ``hand`` (a `HandModel`) and ``pieces``; ``task`` selects the
-    object's joint (None: free). Raises `EvalError` if MuJoCo rejects the model."""
+    object's joint (None: free); ``table`` (4,) ``[n, d]``: the support plane of a tabletop row
+    (None: no table). Raises `EvalError` if MuJoCo rejects the model."""
     spec = mujoco.MjSpec()
     opt = spec.option
     opt.timestep = cfg.timestep_s
@@ -232,6 +238,8 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
                              size=list((hi - lo) / 2), rgba=[0.6, 0.6, 0.65, 0.5])
             _set_contact(g, cfg, hand=False)
         spec.add_exclude(bodyname1="object", bodyname2="scenery")
+    if table is not None:
+        _add_table(spec, np.asarray(table, dtype=np.float64), cfg)
     total = sum(pieces.volumes)
     s = pieces.scale
     for i, (path, vol) in enumerate(zip(pieces.paths, pieces.volumes)):
@@ -249,6 +257,17 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         raise EvalError(f"scene of hand {hand.name!r} and object {pieces.object_id!r}",
                         f"MuJoCo cannot compile it: {str(exc).strip()}") from None
     return _index(model, hand, pieces, "free" if task is None else task.joint, palm)
+
+
+def _add_table(spec: mujoco.MjSpec, plane: np.ndarray, cfg: EvalConfig) -> None:
+    """The table: a plane geom through ``-d n`` with its normal along ``n`` (plane ``[n, d]``)."""
+    n = plane[:3] / np.linalg.norm(plane[:3])
+    quat = np.zeros(4)
+    mujoco.mju_quatZ2Vec(quat, n)
+    body = spec.worldbody.add_body(name="table")
+    g = body.add_geom(name="table_geom", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=list(-plane[3] * n), quat=list(quat),
+                      size=[0.25, 0.25, 0.01], rgba=[0.55, 0.45, 0.35, 1.0])
+    _set_contact(g, cfg, hand=False)
 
 
 class _PalmKinematics:
@@ -339,6 +358,8 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str, palm: 
     obj_geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] == obody])
     env = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "scenery")
     env_geoms = np.array([g for g in range(model.ngeom) if env >= 0 and model.geom_bodyid[g] == env], dtype=np.int64)
+    tb = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "table")
+    table_geoms = np.array([g for g in range(model.ngeom) if tb >= 0 and model.geom_bodyid[g] == tb], dtype=np.int64)
     A = hand.ctrl_matrix.detach().cpu().double().numpy()[kept]
     if palm is not None and np.any(A[:, palm.held_index]):
         raise EvalError(f"hand {hand.name!r}", "an actuator couples a wrist joint to a finger; hand_root: palm cannot hold it")
@@ -350,5 +371,5 @@ def _index(model: mujoco.MjModel, hand, pieces: ObjectPieces, joint: str, palm: 
                  object_body=obody, mocap=int(model.body_mocapid[model.body("hand_mocap").id]),
                  actuators=acts, ctrl_matrix=A, ctrl_range=model.actuator_ctrlrange[acts].copy(),
                  hand_geoms=np.array(hand_geoms), hand_geom_link=np.array(hand_link), object_geoms=obj_geoms,
-                 scenery_geoms=env_geoms,
+                 scenery_geoms=env_geoms, table_geoms=table_geoms,
                  sim_joints=None if palm is None else sim, palm_kinematics=palm)

@@ -16,6 +16,9 @@ Input (Parquet, one row per grasp; other columns are kept as they are):
                     job's shards and to the table's own directory otherwise (`table_base`)
     w_t             list<float32> (6), optional: the task wrench; used by task tests (see
                     `Evaluator.evaluate`), ignored by the six-direction test
+    scene, support_plane
+                    optional: a ``tabletop`` row's support plane (4) gets the lift test
+                    (`datagen.eval.lift`) instead of the six directions
 
 Output: the input columns plus `EVAL_COLUMNS` (declared in schemas/evaluated.json; units in the
 names). Row order is kept.
@@ -40,7 +43,7 @@ from .evaluate import Evaluator, GraspResult
 from .scene import ObjectPieces, pieces_from_processed
 
 __all__ = ["INPUT_COLUMNS", "EVAL_COLUMNS", "EVAL_SCHEMA_VERSION", "append_results", "check_object_paths",
-           "evaluate_table", "pin_table_hands", "read_grasps", "row_poses", "row_pieces", "table_base"]
+           "evaluate_table", "pin_table_hands", "read_grasps", "row_poses", "row_pieces", "row_table", "table_base"]
 
 EVAL_SCHEMA_VERSION = int(declaration("evaluated")["version"])
 INPUT_COLUMNS = ("object_id", "object_scale_m", "hand", "task", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos",
@@ -123,6 +126,12 @@ def row_poses(row: dict) -> np.ndarray:
     return np.stack(rows)
 
 
+def row_table(row: dict):
+    """(4,) the support plane of a tabletop row, None for a floating one (or a table without the
+    scene columns, written before schema 4)."""
+    return row["support_plane"] if row.get("scene") == "tabletop" else None
+
+
 def row_pieces(row: dict, base: Path) -> ObjectPieces:
     """The object of a table row (``object_path`` resolved against ``base``)."""
     from datagen.objects import load_processed
@@ -154,7 +163,7 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None
             if hand not in evaluators:
                 evaluators[hand] = Evaluator(load_hand(hand, base=base), cfg, spare_cores=spare_cores)
             out.append(evaluators[hand].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
-                                                 w_t=row.get("w_t")))
+                                                 w_t=row.get("w_t"), table=row_table(row)))
     finally:
         for ev in evaluators.values():
             ev.close()
@@ -192,7 +201,7 @@ def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", 
     """``table`` with `EVAL_COLUMNS` appended (replaced if present). ``workers`` > 1 splits the
     rows into contiguous chunks evaluated by a process pool (results are identical); with one,
     ``spare_cores`` (see `Evaluator`) lets a grasp use an idle core."""
-    names = list(INPUT_COLUMNS) + (["w_t"] if "w_t" in table.column_names else [])
+    names = list(INPUT_COLUMNS) + [c for c in ("w_t", "scene", "support_plane") if c in table.column_names]
     rows = table.select(names).to_pylist()
     cfg_d = cfg.to_dict()
     if workers <= 1 or len(rows) < 2:
@@ -247,6 +256,7 @@ def append_results(table: pa.Table, results: list[GraspResult]) -> pa.Table:
         "touching_links": [r.touching_links for r in results],
         "num_contacts": [r.num_contacts for r in results],
         "epsilon": [r.epsilon if not math.isnan(r.epsilon) else float("nan") for r in results],
+        "table_penetration_m": [r.table_penetration_m for r in results],
     }
     for name, (dtype, _) in EVAL_COLUMNS.items():
         col = pa.array(values[name], type=dtype)

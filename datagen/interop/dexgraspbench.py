@@ -10,7 +10,10 @@ shares with it, where that XML puts the palm and the joint order (read from its 
 ``assets/hand/leap/right_hand.xml`` includes).
 
 Export writes our grasps in the object's frame (``obj_pose`` identity) with the object's pieces
-in normalized units (``obj_scale`` = ``object_scale_m``). Import reads such files back into rows
+in normalized units (``obj_scale`` = ``object_scale_m``); a tabletop row (``scene`` tabletop) in
+the table frame instead, for the peer's ``setting=tabletop`` (its floor at z = 0): ``obj_pose`` the
+row's ``object_pose_table`` and the hand poses carried along with it, under
+``scale<NNN>_pose<stable pose>``. Import reads such files back into rows
 of the ``grasps`` schema plus processed objects, so ``datagen eval`` and ``datagen render`` take
 them. Loading ``.npy`` dicts unpickles them: import only files you trust.
 """
@@ -68,7 +71,8 @@ def export_grasps(table: pa.Table, base: Path, out: Path, hand) -> list[Path]:
     ``object_path`` values are resolved against ``base``. Returns the written files."""
     peer = peer_hand(builtin_of(hand.spec) or hand.name)
     out = Path(out).resolve()
-    rows = table.select(["object_id", "object_scale_m", "object_path", "hand", "grasp_id", *POSE_KEYS]).to_pylist()
+    scene = [c for c in ("scene", "stable_pose", "object_pose_table") if c in table.column_names]
+    rows = table.select(["object_id", "object_scale_m", "object_path", "hand", "grasp_id", *POSE_KEYS, *scene]).to_pylist()
     if any(r["hand"] != hand.name for r in rows):
         raise ValueError(f"the table holds grasps of {sorted({r['hand'] for r in rows})}; export one hand at a time")
     folders: dict[str, Path] = {}
@@ -81,13 +85,17 @@ def export_grasps(table: pa.Table, base: Path, out: Path, hand) -> list[Path]:
         if key not in folders:
             folders[key] = export_object(entry, out / "objects" / _safe(f"{r['object_id']}_{len(folders)}"))
         poses = to_peer(hand, peer, np.stack([np.asarray(r[k], dtype=np.float64) for k in POSE_KEYS]))
-        group = (r["object_id"], round(r["object_scale_m"] * 100))
+        obj_pose = np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float64)
+        if r.get("scene") == "tabletop":  # the table frame: the peer's floor at z = 0 under the object
+            obj_pose = np.asarray(r["object_pose_table"], dtype=np.float64)
+            poses[:, :7] = matrix_to_pose7(pose7_to_matrix(obj_pose) @ pose7_to_matrix(poses[:, :7]))
+        group = (r["object_id"], round(r["object_scale_m"] * 100), max(int(r.get("stable_pose", 0)), 0))
         i = counters.setdefault(group, 0)
         counters[group] = i + 1
-        path = out / "graspdata" / _safe(r["object_id"]) / f"scale{group[1]:03d}_pose000" / f"{i}.npy"
+        path = out / "graspdata" / _safe(r["object_id"]) / f"scale{group[1]:03d}_pose{group[2]:03d}" / f"{i}.npy"
         path.parent.mkdir(parents=True, exist_ok=True)
         data = {"obj_path": str(folders[key]), "obj_scale": float(r["object_scale_m"]),
-                "obj_pose": np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float64), "grasp_id": r["grasp_id"]}
+                "obj_pose": obj_pose, "grasp_id": r["grasp_id"]}
         data.update({k: poses[j].astype(np.float32) for j, k in enumerate(POSE_KEYS)})
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # a file object: np.save would add ".npy"
             np.save(fh, data, allow_pickle=True)

@@ -50,25 +50,30 @@ def load_object(path: str | Path, process, cache: str | Path | None = None):
 def synthesize(hand: str = "shadow", obj: str | Path = "", task: str | Path = "force_closure", *, n: int = 16,
                scales: Sequence[float] = (0.08,), seed: int | None = None, preset: str | None = None,
                config: Mapping[str, Any] | None = None, evaluate: bool = True, cache: str | Path | None = None,
-               device: str = "cpu"):
+               device: str = "cpu", scene: str | Mapping[str, Any] | None = None):
     """``n`` grasps per scale of ``hand`` on the mesh ``obj`` for ``task``, as a pyarrow Table:
     the ``evaluated`` schema's rows (MuJoCo verdict in ``success``), or with ``evaluate=False``
     the synthesized ``grasps`` rows. ``hand``, ``task``: built-in names or YAML paths; ``scales``:
     metres per normalized object unit; ``seed`` (None: the recipe's, 0); ``preset``/``config``:
     see `datagen.pipeline.resolve` (``config`` a mapping of ``synth``/``eval``/``process``/
-    ``grasp_types``/``grid_resolution`` settings); ``cache``: the objects cache root (default $DATAGEN_CACHE).
+    ``grasp_types``/``grid_resolution``/``scene`` settings); ``scene``: ``"floating"`` or ``"tabletop"``
+    (or ``{"kind": "tabletop", "stable_poses": 2}``; None: the config's, floating; docs/scenes.md);
+    ``cache``: the objects cache root (default $DATAGEN_CACHE).
     Failures of the object's target, synthesis or evaluation raise ValueError naming them."""
     from datagen.hands import load_hand
 
     from .batch import BatchObject, build_targets, run_batch, synthesize_rows
     from .recipe import resolve
 
-    flags = {"synth": {"seed": int(seed)}} if seed is not None else None
+    flags = {"synth": {"seed": int(seed)}} if seed is not None else {}
+    if scene is not None:
+        flags["scene"] = scene
     recipe = resolve(hand, task, preset=preset, config=config, flags=flags)
     model = load_hand(hand, device=device)
     objects = [BatchObject(load_object(obj, recipe.process, cache), tuple(scales))]
     if not evaluate:
-        targets = build_targets(objects, grid_resolution=recipe.grid_resolution, cache=cache, device=device)
+        targets = build_targets(objects, grid_resolution=recipe.grid_resolution, cache=cache, device=device,
+                                scene=recipe.scene)
         return synthesize_rows(model, targets, recipe.load_task(), recipe.synth, n, grasp_types=recipe.grasp_types)[1]
     out = run_batch(objects, model, [recipe], grasps_per_object=n, cache=cache, device=device)
     if out.failures:

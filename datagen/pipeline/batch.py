@@ -9,9 +9,9 @@
 Stages, each a function of its own so a front end can stop early (``datagen synth`` writes the
 synthesized rows without evaluating them) or swap one (a benchmark executing other squeezes):
 
-1. `build_targets`: one `GraspTarget` per object and scale. The SDF and its grid are in
-   normalized units, so they are built once per object (at its first scale) and the hull samples
-   are rescaled for the other scales.
+1. `build_targets`: one `GraspTarget` per object and scale (and, for a tabletop scene, per stable
+   pose: `datagen.objects.tabletop`). The SDF and its grid are in normalized units, so they are
+   built once per object (at its first scale) and the hull samples are rescaled for the other scales.
 2. per recipe (one per task, `datagen.pipeline.resolve`; its objects paired by
    `datagen.tasks.task_targets`): `synthesize_rows`, one batch for every target of the task and
    grasp type (the recipe's ``grasp_types`` by object size), seeded by ``seed``; rows of the
@@ -90,8 +90,10 @@ def failure(object_id: str, stage: str, reason: str, message: str, scale: float 
 
 def build_targets(objects: Sequence[BatchObject], *, grid_resolution: int | None = None,
                   cache: str | Path | None = None, device: str = "cpu", failures: list | None = None,
-                  progress: Callable[[], None] | None = None) -> list:
-    """One `GraspTarget` per object and scale (in order). The SDF and its grid are built once per
+                  progress: Callable[[], None] | None = None, scene=None) -> list:
+    """One `GraspTarget` per object and scale (in order); with ``scene`` tabletop (a
+    `datagen.objects.tabletop.SceneConfig`; None: floating) one per object, scale and stable
+    pose, the object resting on the table (`GraspTarget.on_table`). The SDF and its grid are built once per
     object at its first scale (grids from the grid cache under ``cache``; ``grid_resolution``
     nodes per axis, None: `GraspTarget`'s default); the other scales rescale its hull samples.
     An object whose target cannot be built is appended to ``failures`` (stage ``target``) and
@@ -103,6 +105,7 @@ def build_targets(objects: Sequence[BatchObject], *, grid_resolution: int | None
     for o in objects:
         try:
             base = GraspTarget.from_processed(o.processed, o.scales[0], cache=cache, **kw)
+            poses = _stable_poses(base, scene)
         except Exception as exc:  # noqa: BLE001 - recorded, never fatal
             message = f"{o.object_id}: {type(exc).__name__}: {exc}"
             if failures is None:
@@ -118,8 +121,21 @@ def build_targets(objects: Sequence[BatchObject], *, grid_resolution: int | None
             t = dataclasses.replace(base, object_id=o.object_id, scale=float(s),
                                     hull_points=base.hull_points * (s / base.scale), object_path=o.object_path,
                                     mesh_sha256=o.mesh_sha256)
-            targets.append(t.to(device) if device != "cpu" else t)
+            t = t.to(device) if device != "cpu" else t
+            targets += [t] if poses is None else [t.on_table(p) for p in poses]
     return targets
+
+
+def _stable_poses(target, scene) -> list | None:
+    """The stable poses of a target's object (normalized units) for a tabletop ``scene``; None
+    for a floating one."""
+    if scene is None or not scene.tabletop:
+        return None
+    from datagen.objects.tabletop import stable_poses
+
+    sdf = target.sdf
+    return stable_poses(sdf.vertices.detach().cpu().double().numpy(), sdf.faces.cpu().numpy(),
+                        target.centre_of_mass / target.scale, scene.stable_poses, target.object_id)
 
 
 def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, *, grasp_types=None,
@@ -167,8 +183,11 @@ def evaluate_rows(table: pa.Table, targets: Sequence, task_name: str, eval_cfg, 
     from datagen.eval.table import evaluate_table
 
     def rows_of(tb: pa.Table, t) -> pa.Table:
-        return tb.filter(pc.and_(pc.equal(tb["object_id"], t.object_id),
-                                 pc.equal(tb["object_scale_m"], pa.scalar(t.scale, pa.float32()))))
+        same = pc.and_(pc.equal(tb["object_id"], t.object_id),
+                       pc.equal(tb["object_scale_m"], pa.scalar(t.scale, pa.float32())))
+        if "stable_pose" in tb.column_names:  # one stable pose's rows (all -1 when floating)
+            same = pc.and_(same, pc.equal(tb["stable_pose"], pa.scalar(t.stable_pose, pa.int32())))
+        return tb.filter(same)
 
     if workers > 1 and len(targets) > 1:
         try:
@@ -219,6 +238,9 @@ def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps
     grids = {r.grid_resolution for r in recipes}
     if len(grids) > 1:
         raise ValueError(f"run_batch: the recipes must share one grid_resolution, got {sorted(grids)}")
+    scenes = {r.scene for r in recipes}
+    if len(scenes) > 1:
+        raise ValueError(f"run_batch: the recipes must share one scene, got {sorted(s.kind for s in scenes)}")
     n_targets = sum(len(o.scales) for o in objects)
     total = len(objects) + 2 * len(recipes) * n_targets
     done = 0.0
@@ -231,7 +253,8 @@ def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps
 
     t0 = time.perf_counter()
     all_targets = build_targets(objects, grid_resolution=grids.pop() if grids else None, cache=cache,
-                                device=device, failures=fails, progress=lambda: report(1))
+                                device=device, failures=fails, progress=lambda: report(1),
+                                scene=scenes.pop() if scenes else None)
     timings["target_s"] = time.perf_counter() - t0
     report(len(objects), absolute=True)
     splits = {o.object_id: o.split for o in objects}

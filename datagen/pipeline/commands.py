@@ -25,6 +25,11 @@ def add_recipe_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grasp-type", default=None, dest="grasp_type",
                    help="every force-closure grasp of this grasp type (`datagen/tasks/grasp_types`: precision, "
                         "power; or a YAML), instead of the preset's choice by object size")
+    p.add_argument("--scene", default=None, choices=("floating", "tabletop"),
+                   help="floating (in space, the six-direction test; the default) or tabletop (the object resting "
+                        "on a table in its stable poses, the lift test; docs/scenes.md)")
+    p.add_argument("--stable-poses", type=int, default=None, dest="stable_poses",
+                   help="tabletop: stable poses per object, the most probable first (default 1)")
 
 
 def recipe_flags(args) -> dict:
@@ -35,6 +40,9 @@ def recipe_flags(args) -> dict:
         out["preset"] = args.preset
     if args.grasp_type is not None:
         out["grasp_types"] = args.grasp_type
+    scene = {k: v for k, v in (("kind", args.scene), ("stable_poses", args.stable_poses)) if v is not None}
+    if scene:
+        out["scene"] = scene
     return out
 
 
@@ -109,7 +117,7 @@ def _synth(args) -> int:
     pin_hand(hand.spec, folder, write=False)
     processed = load_object(args.object, recipe.process, args.cache)
     targets = build_targets([BatchObject(processed, tuple(args.scale))], grid_resolution=recipe.grid_resolution,
-                            cache=args.cache, device=device)
+                            cache=args.cache, device=device, scene=recipe.scene)
 
     def progress(it, x, e, ok):
         if sys.stderr.isatty() and (it % 50 == 0 or it == cfg.iters - 1):

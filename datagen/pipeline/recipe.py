@@ -3,7 +3,7 @@
 Every entry point -- the library call (`datagen.synthesize`), ``datagen synth``, ``datagen
 run`` and its shards, the benchmarks -- gets its settings from `resolve`, which stacks these
 layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``process``,
-``grasp_types``, ``grid_resolution``), in this order::
+``grasp_types``, ``grid_resolution``, ``scene``), in this order::
 
     library defaults   the config dataclasses' own (SynthConfig, EvalConfig, ProcessConfig)
     preset             PRESETS[name]: "dataset" (the default: what a job runs) or "paper"
@@ -15,7 +15,8 @@ A key a layer lacks is unset, and the layer below decides; a key a layer sets wi
 it equals a default (``--seeds 1`` is one seed on every task). Nested mappings (``weights``,
 ``contact``) merge key by key. ``grasp_types`` (a `datagen.tasks.GraspMix`: which grasp type
 each force-closure grasp gets, by object size) may also be a grasp type's name (every grasp of
-that type: ``--grasp-type power``). The squeeze is computed for the evaluation's actuator stiffness of
+that type: ``--grasp-type power``). ``scene`` (a `datagen.objects.tabletop.SceneConfig`: floating,
+or resting on a table in its stable poses) may also be the scene's name (``scene: tabletop``). The squeeze is computed for the evaluation's actuator stiffness of
 the hand (`squeeze_kp`: its protocol's gains), never set on its own. The result is a frozen `Recipe`: what a job records in job.json
 and hashes, and what ``datagen synth`` writes into its table's metadata.
 """
@@ -30,13 +31,14 @@ from datagen.config import Config
 from datagen.errors import ConfigError
 from datagen.eval.config import EvalConfig
 from datagen.objects.config import ProcessConfig
+from datagen.objects.tabletop import SCENES, SceneConfig
 from datagen.synth.config import SynthConfig
 from datagen.tasks.grasp_type import GraspMix
 
 __all__ = ["DEFAULT_PRESET", "PRESETS", "RECIPE_KEYS", "Recipe", "merge_layers", "resolve"]
 
 #: the parts of a configuration layer (a config file may hold other keys: a job's source, count, ...)
-RECIPE_KEYS = ("synth", "eval", "process", "grasp_types", "grid_resolution")
+RECIPE_KEYS = ("synth", "eval", "process", "grasp_types", "grid_resolution", "scene")
 
 # A cheap CoACD setting: threshold 0.1 and preprocess resolution 30 are 2-3x faster than the
 # objects package's defaults (0.05 / 50) and give coarser but adequate pieces for the hold test
@@ -80,6 +82,9 @@ class Recipe(Config):
     #: which grasp type (`datagen.tasks.grasp_type`) each grasp of a force-closure task on every
     #: fingertip gets, by object size; other tasks are their own contact set (precision)
     grasp_types: GraspMix = field(default_factory=GraspMix)
+    #: where the object is: floating (gravity off, the six-direction test) or resting on a table
+    #: in its stable poses (the lift test; docs/scenes.md)
+    scene: SceneConfig = field(default_factory=SceneConfig)
 
     def __post_init__(self):
         if self.preset not in PRESETS:
@@ -120,6 +125,11 @@ def _layer(data: Mapping[str, Any] | None, where: str) -> dict[str, Any]:
     elif data.get("grasp_types") is not None and not isinstance(data["grasp_types"], Mapping):
         raise ConfigError(f"{where}: grasp_types must be a grasp type's name or a mapping with bands, "
                           f"got {type(data['grasp_types']).__name__}")
+    if isinstance(data.get("scene"), str):  # the scene's name: its kind, one stable pose
+        data["scene"] = {"kind": data["scene"]}
+    elif data.get("scene") is not None and not isinstance(data["scene"], Mapping):
+        raise ConfigError(f"{where}: scene must be a scene's name ({' or '.join(SCENES)}) or a mapping "
+                          f"(kind, stable_poses), got {type(data['scene']).__name__}")
     if "squeeze_kp" in (data.get("synth") or {}):
         raise ConfigError(f"{where}: synth.squeeze_kp is the evaluation's actuator_kp",
                           "set eval.actuator_kp instead (the squeeze is computed for it)")
@@ -158,5 +168,10 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
                                   where=f"{where}: synth (task {spec.name!r})")
     process = ProcessConfig.from_dict(merged.get("process"), where=f"{where}: process")
     mix = GraspMix.from_dict(merged.get("grasp_types"), where=f"{where}: grasp_types")
+    scene = SceneConfig.from_dict(merged.get("scene"), where=f"{where}: scene")
+    if scene.tabletop and spec.eval != "six_direction":
+        raise ConfigError(f"{where}: scene tabletop: task {spec.name!r} has its own test (eval block), which has no table",
+                          "use scene tabletop with force-closure tasks (the six-direction test becomes the lift)")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
-                  grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix)
+                  grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
+                  scene=scene)

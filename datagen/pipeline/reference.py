@@ -78,6 +78,7 @@ def render() -> str:
     from datagen.eval.config import EvalConfig
     from datagen.objects.config import ProcessConfig
     from datagen.objects.observations import ObservationConfig
+    from datagen.objects.tabletop import SceneConfig
     from datagen.synth.config import EnergyWeights, SynthConfig
     from datagen.tasks.grasp_type import GraspBand, GraspMix
     from datagen.wrench.contact import ContactModel
@@ -91,13 +92,14 @@ def render() -> str:
           "benchmarks) resolves one recipe per hand and task (`datagen.pipeline.resolve`) from these layers, "
           "later ones winning key by key: the library defaults below -> a preset -> the task YAML's `synth:` "
           "block -> the user's config file (`--config`) -> explicit flags (`--preset`, `--iters`, `--seeds`, "
-          "`--seed`, `--grasp-type`). A key a layer does not set is left to the layer below, so a flag equal to a default "
+          "`--seed`, `--grasp-type`, `--scene`, `--stable-poses`). A key a layer does not set is left to the layer below, so a flag equal to a default "
           "still wins over a task.", "",
-          "A config file is YAML with any of `preset`, `synth`, `eval`, `process`, `grasp_types`, `grid_resolution` (a job's "
+          "A config file is YAML with any of `preset`, `synth`, `eval`, `process`, `grasp_types`, `grid_resolution`, `scene` (a job's "
           "config file adds the job's own fields, `workers/job.py` `JobConfig`):", "",
           "```yaml", "preset: dataset", "synth: {iters: 300, seeds_per_grasp: 8, weights: {distance: 2.0e4}}",
           "eval: {settle_checks: 0}", "process: {coacd_threshold: 0.05}", "grid_resolution: 48",
           "grasp_types: {bands: [{max_scale_m: 0.09, mix: {precision: 1}}, {mix: {power: 0.5, precision: 0.5}}]}",
+          "scene: {kind: tabletop, stable_poses: 2}",
           "```", "",
           "## Presets", "", f"The default is `{DEFAULT_PRESET}`.", "", "| preset | settings over the library defaults |",
           "|---|---|"]
@@ -111,6 +113,11 @@ def render() -> str:
            "object's scale applies, and its `mix` splits each object's grasps between types by share. A grasp "
            "type's name instead of the mapping (`--grasp-type power`) gives every grasp that type.", ""]
     md += _table(GraspMix, "") + _table(GraspBand, "bands[].")
+    md += ["## `scene`: floating or on a table (`SceneConfig`)", "",
+           "Where the object is when it is grasped (docs/scenes.md): `floating` (the six-direction test) or "
+           "`tabletop`, resting on a table in each of its `stable_poses` most probable stable poses (the lift "
+           "test). A scene's name instead of the mapping (`scene: tabletop`, `--scene tabletop`) is that kind "
+           "with one stable pose.", ""] + _table(SceneConfig, "")
     md += ["## `eval`: the MuJoCo tests (`EvalConfig`)", ""] + _table(EvalConfig, "")
     md += ["## `process`: object processing (`ProcessConfig`)", ""] + _table(ProcessConfig, "")
     md += ["## `observations`: what a learner sees of each object (`ObservationConfig`, a job's field)", "",

@@ -11,10 +11,12 @@ midpoint of the two farthest apart, at the initial joints) that lands on ``targe
 by ``distance_m`` against the approach: a precision grasp's fingertips start around the part
 they pinch, wherever the hand's palm frame lies; there ``thumb`` gives the direction from the other
 task fingertips to the thumb tip (the pinch axis), not the palm's thumb axis.
-With ``scenery`` (static boxes round a mounted task object), ``surround`` draws only hull points
+With ``scenery`` (static boxes round a mounted task object, the table under a tabletop
+target: `datagen.synth.scenery`), ``surround`` draws only hull points
 whose palm origins, at both ends of ``distance_m``, stay `SCENERY_CLEARANCE_M` clear of every box,
-and a start with a collision sphere in a box is drawn again: no hand starts behind a door or with
-its forearm in a cabinet.
+and a start with a collision sphere in a box is drawn again: no hand starts behind a door, with
+its forearm in a cabinet or below the table (a tabletop object is approached from above and
+from the side).
 Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
 way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
 is drawn from the passed generator.
@@ -174,9 +176,10 @@ def _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery):
             continue
         if init_cfg.kind == "surround":
             pts, nrm = target.hull_points.to(dev, dt), target.hull_normals.to(dev, dt)
-            if scenery is not None and bool(scenery.on_target[k]):
+            if scenery is not None and scenery.applies_to(k):
                 lo, hi = init_cfg.distance_m
-                ok = scenery.clear_of(pts + lo * nrm, SCENERY_CLEARANCE_M) & scenery.clear_of(pts + hi * nrm, SCENERY_CLEARANCE_M)
+                ok = (scenery.clear_of(pts + lo * nrm, SCENERY_CLEARANCE_M, k)
+                      & scenery.clear_of(pts + hi * nrm, SCENERY_CLEARANCE_M, k))
                 if not bool(ok.any()):
                     raise ValueError(f"{target.object_id}: no convex-hull point has room for a palm outside the "
                                      f"task's scenery (distance_m {init_cfg.distance_m})")

@@ -17,10 +17,12 @@ __all__ = ["grasp_id", "hand_asset_sha256", "result_table"]
 
 
 def grasp_id(object_id: str, scale: float, hand: str, task: str, seed: int, index: int,
-             grasp_type: str = "precision") -> str:
+             grasp_type: str = "precision", stable_pose: int = -1) -> str:
     key = f"{object_id}|{scale:.6f}|{hand}|{task}|{seed}|{index}"
     if grasp_type not in ("precision", "task"):  # the fingertip grasps keep the ids they had
         key += f"|{grasp_type}"
+    if stable_pose >= 0:  # on a table: one id space per stable pose (floating grasps keep theirs)
+        key += f"|table{stable_pose}"
     return hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
@@ -58,7 +60,7 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
     e = {k: f32(v) for k, v in result.energies.items()}
     columns = {
         "grasp_id": [grasp_id(targets[k].object_id, targets[k].scale, hand.name, task.name, result.seed, int(i),
-                              result.grasp_type) for k, i in zip(oi, index)],
+                              result.grasp_type, targets[k].stable_pose) for k, i in zip(oi, index)],
         "object_id": [targets[k].object_id for k in oi],
         "split": [(splits or {}).get(targets[k].object_id, "") for k in oi],
         "object_scale_m": np.array([targets[k].scale for k in oi], dtype=np.float32),
@@ -87,6 +89,7 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
         "synth_usable": result.usable(thr).cpu().numpy(),
         "seed": np.full(B, result.seed, dtype=np.int64),
         "grasp_index": index,
+        **_scene_columns([targets[k] for k in oi], fixed),
     }
     schema = arrow_schema("grasps", nq=nq)
     meta = dict(schema.metadata)
@@ -96,3 +99,18 @@ def result_table(result, targets, hand, task, cfg, *, contact_threshold_m: float
         b"datagen.synth_config": json.dumps(cfg.to_dict(), default=list).encode(),
     })
     return pa.Table.from_pydict(columns, schema=schema.with_metadata(meta))
+
+
+_IDENTITY_POSE = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+
+
+def _scene_columns(targets, fixed) -> dict:
+    """The scene columns of rows on ``targets`` (one per row): ``scene``, ``stable_pose``, the
+    object's pose in the table frame and the support plane in the object frame (floating: -1,
+    the identity and a zero plane)."""
+    return {
+        "scene": [t.scene for t in targets],
+        "stable_pose": np.array([t.stable_pose for t in targets], dtype=np.int32),
+        "object_pose_table": fixed(np.array([t.table_pose or _IDENTITY_POSE for t in targets]).reshape(-1, 7), 7),
+        "support_plane": fixed(np.array([t.support_plane or (0.0,) * 4 for t in targets]).reshape(-1, 4), 4),
+    }

@@ -231,7 +231,8 @@ def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, 
     if grasp_type is not None:
         task = dataclasses.replace(task, init=grasp_type.apply_init(task.init))
     seed_index = object_index.repeat_interleave(cfg.seeds_per_grasp)  # seeds of grasp b: rows b S .. b S + S - 1
-    scenery = Scenery.for_task(task, targets, dev, dt)  # a mounted object's door, housing or cabinet
+    # a mounted object's door, housing or cabinet; the table under a tabletop target
+    scenery = Scenery.for_task(task, targets, dev, dt, cfg.sphere_margin_m)
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
     return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,

@@ -19,7 +19,8 @@ __all__ = ["GraspTarget"]
 
 @dataclass
 class GraspTarget:
-    """One object at one scale, in its own frame (origin at its bounding-box centre).
+    """One object at one scale, in its own frame (origin at its bounding-box centre), floating or
+    resting on a table in one stable pose (`on_table`; the table is ``support_plane`` there).
 
     ``sdf`` holds the surface in normalized units; ``scale`` is metres per unit. ``hull_points``
     ``(H, 3)`` metres and ``hull_normals`` ``(H, 3)`` outward unit sample the convex hull for
@@ -34,6 +35,10 @@ class GraspTarget:
     object_path: str = ""  #: processed-object directory (for evaluation and provenance)
     mesh_sha256: str = ""
     grid: GridSDF | None = None  #: fast approximate distances for the collision spheres
+    scene: str = "floating"  #: "floating", or "tabletop": resting on a table (`datagen.objects.tabletop`)
+    stable_pose: int = -1  #: tabletop: the rank of its stable pose (0 the most probable); -1 floating
+    support_plane: tuple | None = None  #: tabletop: (4,) ``[n, d]``, height above the table ``n . x + d`` (m, object frame)
+    table_pose: tuple | None = None  #: tabletop: (7,) the object's pose in the table frame ``[x y z qw qx qy qz]`` (m)
 
     @classmethod
     def from_mesh(cls, mesh: trimesh.Trimesh, scale: float, object_id: str, *, object_path: str = "",
@@ -85,6 +90,12 @@ class GraspTarget:
         mesh = trimesh.Trimesh(self.sdf.vertices.detach().cpu().double().numpy(), self.sdf.faces.cpu().numpy(),
                                process=False)
         return np.asarray(mesh.center_mass, dtype=np.float64) * self.scale
+
+    def on_table(self, pose) -> "GraspTarget":
+        """This target resting on a table in ``pose`` (a `datagen.objects.tabletop.StablePose`)."""
+        return replace(self, scene="tabletop", stable_pose=int(pose.index),
+                       support_plane=tuple(float(x) for x in pose.plane(self.scale)),
+                       table_pose=tuple(float(x) for x in pose.pose7(self.scale)))
 
     def query(self, points: torch.Tensor) -> SDFResult:
         """Signed distance (m, < 0 inside), closest point (m), outward normal for ``(..., 3)`` m."""

@@ -123,7 +123,7 @@ class Browser:
         with gui.add_folder("Layers"):
             self.layers = {role: gui.add_checkbox(label, initial_value=self.drawing.visible[role])
                            for role, label in (("object", "object (convex pieces)"), ("hand", "hand meshes"),
-                                               ("collision", "hand collision geoms"),
+                                               ("collision", "hand collision geoms"), ("table", "the table (tabletop rows)"),
                                                ("contacts", "contact points and normals"))}
         with gui.add_folder("Row"):
             self.panel = gui.add_markdown("")
@@ -199,8 +199,9 @@ class Browser:
             self.g_where.content = f"grasp {k + 1} / {len(self.object_rows)} of this object, pose **{state}**"
             try:
                 hand, task, scale = s.value("hand", i), s.value("task", i) or "", s.scale(i)
-                posed = self.cache.posed(hand, s.object_dir(i), scale, task, s.poses(i))
-                key = (hand, str(s.object_dir(i)), scale, task)
+                posed = self.cache.posed(hand, s.object_dir(i), scale, task, s.poses(i), s.table(i))
+                key = (hand, str(s.object_dir(i)), scale, task, s.table(i))
+                self.server.scene.set_up_direction(tuple(key[4][:3]) if key[4] else "+z")  # the table's up
                 self.drawing.show(posed, s.value("contact_points", i), s.value("contact_normals", i), state, key)
             except (ValueError, OSError) as exc:
                 self.panel.content = f"**cannot show row {i}**: {exc}"

@@ -17,6 +17,7 @@ __all__ = ["GraspDrawing", "NORMAL_LENGTH_M", "camera_for"]
 
 NORMAL_LENGTH_M = 0.02          # drawn length of a contact normal
 OBJECT_RGB = (217, 140, 51)     # the evaluation render's object colour
+TABLE_RGB = (150, 125, 100)  # a tabletop row's table
 HAND_RGB = (120, 130, 150)      # the hand's visual meshes (MuJoCo's near-white would vanish on the page)
 COLLISION_RGB = (60, 130, 230)
 CONTACT_RGB = (220, 20, 60)
@@ -42,10 +43,10 @@ class GraspDrawing:
     def __init__(self, scene) -> None:
         self.scene = scene
         self.nodes: list = []          # one handle per geom of the drawn scene (None: not drawn)
-        self.roles: list[str] = []     # "object", "hand" or "collision" per geom
+        self.roles: list[str] = []     # "object", "hand", "collision" or "table" per geom
         self.contacts = None
         self._key = None
-        self.visible = {"object": True, "hand": True, "collision": False, "contacts": True}
+        self.visible = {"object": True, "hand": True, "collision": False, "contacts": True, "table": True}
 
     def _build(self, posed: PosedGrasp) -> None:
         self.scene.remove_by_name("/grasp")
@@ -54,6 +55,8 @@ class GraspDrawing:
         for i, g in enumerate(posed.geoms):
             if g.part == "object":
                 role, rgb, opacity = "object", OBJECT_RGB, None
+            elif g.part == "table":
+                role, rgb, opacity = "table", TABLE_RGB, 0.6
             elif g.collision and hand_visual:
                 role, rgb, opacity = "collision", COLLISION_RGB, 0.45
             else:  # a visual mesh, or a collision geom of a hand without visual meshes

@@ -43,8 +43,9 @@ def export_html(source: GraspSource, rows: list[int], out_dir: str | Path, *,
             server.scene.set_up_direction("+z")
             drawing = GraspDrawing(server.scene)
             hand, task, scale = source.value("hand", i), source.value("task", i) or "", source.scale(i)
-            posed = cache.posed(hand, source.object_dir(i), scale, task, source.poses(i))
-            key = (hand, str(source.object_dir(i)), scale, task)
+            posed = cache.posed(hand, source.object_dir(i), scale, task, source.poses(i), source.table(i))
+            key = (hand, str(source.object_dir(i)), scale, task, source.table(i))
+            server.scene.set_up_direction(tuple(key[4][:3]) if key[4] else "+z")  # the table's up
             points, normals = source.value("contact_points", i), source.value("contact_normals", i)
             head = f"{source.value('object_id', i)} at {scale:.3f} m, {hand}, {task}: {verdict_line(source, i)}"
 

@@ -1,8 +1,9 @@
 """A row's hand and object as posed meshes, from the evaluation's own MuJoCo scene.
 
 The scene is `datagen.eval.build_scene` of the row's hand, processed object (its convex
-pieces at the row's scale) and task, with the evaluation config the rows were simulated with:
-the page shows what was simulated. Each geom becomes one `Geom` (a mesh in its own frame:
+pieces at the row's scale) and task, with the evaluation config the rows were simulated with,
+and a tabletop row's table (part ``table``, a thin slab whose top is the plane): the page shows
+what was simulated. Each geom becomes one `Geom` (a mesh in its own frame:
 MuJoCo's compiled mesh vertices, or a primitive tessellated by trimesh), and a pose of the
 hand is a (G, 3) position and (G, 4) quaternion per geom, read from MuJoCo's kinematics
 (``set_static_pose``, the same call the evaluation's static metrics use). MuJoCo's kinematics
@@ -10,7 +11,9 @@ of this model equal the project's FK (`HandModel.link_transforms`, checked at ha
 
 States: ``pregrasp``, ``grasp``, ``squeeze`` (the actuator target, placed kinematically) and
 ``simulated``: the scene after the evaluation's closing, pregrasp -> grasp -> squeeze
-(`datagen.eval.hold.close_hand`), where the object may have moved. Lengths in metres.
+(`datagen.eval.hold.close_hand`), where the object may have moved; for a tabletop row after
+the lift test's closing under its gravity-equivalent force and the lift (`datagen.eval.lift`).
+Lengths in metres.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import trimesh
 
 from datagen.eval import EvalConfig, EvalError, build_scene, pieces_from_processed
 from datagen.eval.hold import close_hand, initial_state
+from datagen.eval.lift import lift, table_normal
 from datagen.eval.metrics import set_static_pose
 from datagen.eval.scene import HAND_PREFIX, Scene
 
@@ -68,17 +72,22 @@ def _primitive(kind: int, size: np.ndarray) -> trimesh.Trimesh | None:
 
 
 def scene_geoms(scene: Scene) -> list[Geom]:
-    """Every drawable hand and object geom of ``scene`` (see module docstring)."""
+    """Every drawable hand, object and table geom of ``scene`` (see module docstring)."""
     m = scene.model
     obj = set(int(g) for g in scene.object_geoms)
+    table = set(int(g) for g in scene.table_geoms)
     out = []
     for g in range(m.ngeom):
         body = m.body(m.geom_bodyid[g]).name
-        part = "object" if g in obj else ("hand" if body.startswith(HAND_PREFIX) else None)
+        part = "object" if g in obj else ("hand" if body.startswith(HAND_PREFIX) else "table" if g in table else None)
         if part is None:
             continue
         kind = int(m.geom_type[g])
-        if kind == _G.mjGEOM_MESH:
+        if part == "table":  # the plane as a slab 2 mm thick, its top face the plane (z = 0 of the geom)
+            slab = trimesh.creation.box(extents=[2 * m.geom_size[g][0], 2 * m.geom_size[g][1], 0.002])
+            slab.apply_translation([0, 0, -0.001])
+            verts, faces = np.asarray(slab.vertices), np.asarray(slab.faces)
+        elif kind == _G.mjGEOM_MESH:
             k = int(m.geom_dataid[g])
             va, vn = int(m.mesh_vertadr[k]), int(m.mesh_vertnum[k])
             fa, fn = int(m.mesh_faceadr[k]), int(m.mesh_facenum[k])
@@ -125,7 +134,10 @@ class PosedGrasp:
         if name not in self._cache:
             m = self.scene.model
             data = mujoco.MjData(m)
-            if name == "simulated":
+            if name == "simulated" and len(self.scene.table_geoms):
+                lift(self.scene, data, self.poses, table_normal(self.scene), self.cfg)
+                mujoco.mj_kinematics(m, data)
+            elif name == "simulated":
                 initial_state(self.scene, data, self.poses[0])
                 close_hand(self.scene, data, self.poses, self.cfg)
                 mujoco.mj_kinematics(m, data)
@@ -161,11 +173,13 @@ class SceneCache:
                 raise ViewError(f"hand {name!r}", str(exc)) from None
         return self._hands[name]
 
-    def posed(self, hand: str, object_dir: Path, scale: float, task: str, poses: np.ndarray) -> PosedGrasp:
-        """The `PosedGrasp` of one row (scene built once per hand, object, scale and task)."""
+    def posed(self, hand: str, object_dir: Path, scale: float, task: str, poses: np.ndarray,
+              table: tuple | None = None) -> PosedGrasp:
+        """The `PosedGrasp` of one row (scene built once per hand, object, scale, task and
+        table: a tabletop row's support plane, None floating)."""
         from datagen.objects import load_processed
 
-        key = (hand, str(object_dir), float(scale), task)
+        key = (hand, str(object_dir), float(scale), task, table)
         if key not in self._scenes:
             try:
                 processed = load_processed(Path(object_dir))
@@ -177,7 +191,7 @@ class SceneCache:
                 test = self.cfg.task_test(task)
             except EvalError:
                 test = None  # a task without a test: shown on a free object
-            scene = build_scene(self.hand(hand), pieces, self.cfg, test)
+            scene = build_scene(self.hand(hand), pieces, self.cfg, None if table is not None else test, table=table)
             self._scenes[key] = (scene, scene_geoms(scene))
             while len(self._scenes) > self._size:
                 self._scenes.popitem(last=False)

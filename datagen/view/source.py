@@ -174,6 +174,11 @@ class GraspSource:
         row = self.row(i)
         return np.stack([np.asarray(row[c], dtype=np.float64) for c in POSE_COLUMNS])
 
+    def table(self, i: int) -> tuple | None:
+        """The support plane ``[n, d]`` (object frame) of a tabletop row ``i``; None: floating."""
+        row = self.row(i)
+        return tuple(float(x) for x in row["support_plane"]) if row.get("scene") == "tabletop" else None
+
     def object_dir(self, i: int) -> Path:
         """The processed-object directory of row ``i``."""
         p = Path(self.value("object_path", i))

@@ -355,3 +355,38 @@ def test_export_of_a_job_directory(e3m5_job, hands, tmp_path):
         for k in POSES:
             err = np.linalg.norm(_peer_tips(model, hand, d[k]) - _our_tips(hand, row[k]), axis=-1).max()
             assert err < TOL_M
+
+
+@pytest.mark.parametrize("name", HANDS)
+def test_tabletop_rows_export_in_the_table_frame(name, hands, tmp_path):
+    """A tabletop row goes to the peer in its table frame (its floor z = 0): obj_pose the row's
+    object_pose_table, the hand carried with the object, the stable pose in the folder name; the
+    import takes it back to our object frame."""
+    hand = hands[name]
+    _box_entry(tmp_path)
+    poses = _random_poses(hand, 2, np.random.default_rng(11))
+    q = np.array([0.9, 0.3, -0.2, 0.1])
+    T = np.concatenate([[0.02, -0.01, 0.035], q / np.linalg.norm(q)])
+    path = _table(tmp_path / "grasps.parquet", name, poses)
+    t = pq.read_table(path)
+    t = t.append_column("scene", pa.array(["tabletop"] * 2)).append_column("stable_pose", pa.array([1, 1], pa.int32()))
+    t = t.append_column("object_pose_table", pa.array([T.tolist()] * 2, pa.list_(pa.float32(), 7)))
+    pq.write_table(t, path)
+    assert main(["export", str(path), "--format", "dexgraspbench", "--out", str(tmp_path / "dgb")]) == 0
+    files = sorted((tmp_path / "dgb" / "graspdata").rglob("*.npy"))
+    assert {f.parent.name for f in files} == {"scale008_pose001"}
+    from datagen.interop import pose7_to_matrix
+
+    M, model = pose7_to_matrix(T.astype(np.float32).astype(np.float64)), peer_model(name)
+    rows = {r["grasp_id"]: r for r in t.to_pylist()}
+    for f in files:
+        d = np.load(f, allow_pickle=True).item()
+        assert np.allclose(d["obj_pose"], T, atol=1e-6)
+        ours = _our_tips(hand, rows[d["grasp_id"]]["grasp_qpos"])
+        table_frame = ours @ M[:3, :3].T + M[:3, 3]
+        assert np.linalg.norm(_peer_tips(model, hand, d["grasp_qpos"]) - table_frame, axis=-1).max() < TOL_M
+    back = tmp_path / "back.parquet"
+    assert main(["import", "--format", "dexgraspbench", str(files[0].parent), "--hand", name, "--out", str(back)]) == 0
+    r = pq.read_table(back).to_pylist()[0]
+    ref = rows[np.load(sorted(files[0].parent.glob("*.npy"))[0], allow_pickle=True).item()["grasp_id"]]
+    assert np.linalg.norm(_our_tips(hand, r["grasp_qpos"]) - _our_tips(hand, ref["grasp_qpos"]), axis=-1).max() < TOL_M

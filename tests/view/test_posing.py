@@ -105,3 +105,22 @@ def test_other_hands_follow_their_fk(name, source):
             Tl = T[hand.link_names.index(m.body(m.geom_bodyid[geom.index]).name[len(HAND_PREFIX):])]
             assert np.abs(pos[k] - (Tl[:3, 3] + Tl[:3, :3] @ m.geom_pos[geom.index])).max() < 1e-5
             assert np.abs(_mat(quat[k]) - Tl[:3, :3] @ _mat(m.geom_quat[geom.index])).max() < 1e-5
+
+
+def test_a_tabletop_row_shows_its_table_and_the_lift(source):
+    """With a support plane the scene gets the table: a slab whose top face is the plane (every
+    corner at height 0 by the row's plane), and the simulated state is the lift test's end."""
+    i = 0
+    plane = (0.0, 0.6, 0.8, 0.03)  # the table's up direction (object frame) and offset, m
+    posed = SceneCache(source.eval_config).posed(source.values("hand")[i], source.object_dir(i), source.scale(i),
+                                                 source.values("task")[i], source.poses(i), table=plane)
+    tables = [k for k, g in enumerate(posed.geoms) if g.part == "table"]
+    assert len(tables) == 1 and sum(g.part == "object" for g in posed.geoms) >= 1
+    g = posed.geoms[tables[0]]
+    pos, quat, _, _ = posed.state("grasp")
+    corners = g.vertices @ _mat(quat[tables[0]]).T + pos[tables[0]]
+    height = corners @ np.array(plane[:3]) + plane[3]
+    assert height.max() == pytest.approx(0.0, abs=1e-6) and height.min() == pytest.approx(-0.002, abs=1e-6)
+    _, _, opos, _ = posed.state("simulated")
+    # the object ends on the table (left there) or lifted with the hand, never below the table
+    assert float(np.asarray(plane[:3]) @ opos) > -0.005
