@@ -70,12 +70,15 @@ def _warm(count: int, cache: str) -> None:
 
 def compare(hands: list[str], count: int, baseline: Path | None, runs: int, cache: str, tmp: Path,
             commit: str, base_commit: str) -> list[str]:
-    """Run the jobs and return the report section's lines."""
+    """Run the jobs and return the report section's lines; a hand written ``NAME:R`` gets R runs
+    per code instead of ``runs``."""
     codes = {"this": ROOT} | ({"baseline": baseline} if baseline else {})
+    want = {h.partition(":")[0]: int(h.partition(":")[2] or runs) for h in hands}
+    hands = list(want)
     _warm(count, cache)
     res: dict = {(h, c): [] for h in hands for c in codes}
-    for r in range(runs):
-        for h in hands:
+    for r in range(max(want.values())):
+        for h in [h for h in hands if want[h] > r]:
             for c in (list(codes) if r % 2 == 0 else list(reversed(codes))):
                 s = _run(codes[c], h, count, tmp / f"{h}-{c}-{r}", cache)
                 res[(h, c)].append(s)
@@ -85,7 +88,7 @@ def compare(hands: list[str], count: int, baseline: Path | None, runs: int, cach
     lines = [HEADING, "",
              f"`datagen run --manifest {MANIFEST} --objects {count} --hand H` (the default JobConfig otherwise: "
              "force closure, 16 grasps per object and scale at 0.06 / 0.08 / 0.10 m, shard size auto), 2 worker "
-             f"CPUs, warm objects cache, {runs} runs per code and hand alternating; wall = median (runs in "
+             f"CPUs, warm objects cache, runs per code and hand ({', '.join(f'{h} {n}' for h, n in want.items())}) alternating; wall = median (runs in "
              "brackets), Ray start-up included. Core-hour = wall x 2; CPU-hour = the shards' own CPU time.", "",
              "| hand | code | wall (s) | grasps | validated | validated / core-hour | shard CPU (s) | validated / CPU-hour |",
              "|---|---|---|---|---|---|---|---|"]
