@@ -83,7 +83,7 @@ def compare(hands: list[str], count: int, baseline: Path | None, runs: int, cach
                 s = _run(codes[c], h, count, tmp / f"{h}-{c}-{r}", cache)
                 res[(h, c)].append(s)
                 print(f"{h}, {c}, run {r}: {s['wall']:.1f} s, {s['success']}/{s['grasps']} validated, "
-                      f"shard CPU {s['stage_seconds'].get('shard_cpu_s', 0):.1f} s", flush=True)
+                      f"stages {json.dumps(s['stage_seconds'])}", flush=True)
     label = {"this": f"this ({commit})", "baseline": f"baseline ({base_commit})"}
     lines = [HEADING, "",
              f"`datagen run --manifest {MANIFEST} --objects {count} --hand H` (the default JobConfig otherwise: "
