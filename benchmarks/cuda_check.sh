@@ -59,8 +59,10 @@ rm -rf "$OUT/job_real"
 { nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader,nounits -lms 500 >"$OUT/gpu_util.csv" 2>/dev/null & } ; SMI=$!
 J0=$(date +%s.%N)
 if python3 -c "import ray" 2>/dev/null; then
-  timeout "$(lim 240)" python3 -m datagen.cli run --manifest manifests/real_dev.jsonl --objects $REAL --hand $HAND \
-    --out "$OUT/job_real" --num-cpus $CPUS --no-progress >"$OUT/job_real.log" 2>&1
+  # one shard of every object (one synthesis batch on the GPU), its CPUs as MuJoCo processes
+  printf 'cpus_per_shard: %s\nobjects_per_shard: %s\n' "$CPUS" "$REAL" >"$OUT/job_real.yaml"
+  timeout "$(lim 240)" python3 -m datagen.cli run --config "$OUT/job_real.yaml" --manifest manifests/real_dev.jsonl \
+    --objects $REAL --hand $HAND --out "$OUT/job_real" --num-cpus $CPUS --no-progress >"$OUT/job_real.log" 2>&1
   python3 -m datagen.cli status "$OUT/job_real" --json >"$OUT/job_real_status.json" 2>>"$OUT/job_real.log"
   J1=$(date +%s.%N); python3 - "$OUT/job_real_status.json" "$J0" "$J1" <<'PY'
 import json, sys
