@@ -61,18 +61,18 @@ J0=$(date +%s.%N)
 if python3 -c "import ray" 2>/dev/null; then
   # one shard of every object (one synthesis batch on the GPU), its CPUs as MuJoCo processes
   printf 'cpus_per_shard: %s\nobjects_per_shard: %s\n' "$CPUS" "$REAL" >"$OUT/job_real.yaml"
-  timeout "$(lim 240)" python3 -m datagen.cli run --config "$OUT/job_real.yaml" --manifest manifests/real_dev.jsonl \
+  timeout "$(lim 300)" python3 -m datagen.cli run --config "$OUT/job_real.yaml" --manifest manifests/real_dev.jsonl \
     --objects $REAL --hand $HAND --out "$OUT/job_real" --num-cpus $CPUS --no-progress >"$OUT/job_real.log" 2>&1
   python3 -m datagen.cli status "$OUT/job_real" --json >"$OUT/job_real_status.json" 2>>"$OUT/job_real.log"
   J1=$(date +%s.%N); python3 - "$OUT/job_real_status.json" "$J0" "$J1" <<'PY'
 import json, sys
 s = json.load(open(sys.argv[1])); wall = float(sys.argv[3]) - float(sys.argv[2])
-print(f"ray job: wall_s={wall:.1f} rows={s['grasps']} success={s['success']} "
+print(f"ray job: wall_s={wall:.1f} shards_done={s['shards_done']}/{s['shards_total']} rows={s['grasps']} success={s['success']} "
       f"validated_per_gpu_hour={s['success'] / (wall / 3600):.0f} stages={s['stage_seconds']}")
 PY
 else
   echo "ray not importable: the same job's shards in-process (benchmarks/cuda_shards.py)"
-  timeout "$(lim 240)" python3 -m benchmarks.cuda_shards "$OUT/job_real" $REAL --per-shard $REAL --cpus $CPUS \
+  timeout "$(lim 300)" python3 -m benchmarks.cuda_shards "$OUT/job_real" $REAL --per-shard $REAL --cpus $CPUS \
     --manifest manifests/real_dev.jsonl --hand $HAND >"$OUT/job_real.log" 2>&1
   grep -E "^shards|^failure" "$OUT/job_real.log" | cut -c1-600
 fi
