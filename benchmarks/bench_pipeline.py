@@ -253,6 +253,29 @@ def _commit() -> str:
         return "unknown"
 
 
+def _real(args) -> int:
+    """``--real``: the real-mesh section of the report, written first in ``--out`` (other sections kept)."""
+    import subprocess
+
+    from benchmarks.common import replace_section
+    from benchmarks.pipeline_real import HEADING, compare
+
+    cache = args.cache or os.environ.get("DATAGEN_CACHE") or ""
+    base = Path(args.baseline).resolve() if args.baseline else None
+    base_commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                 cwd=base).stdout.strip() if base else ""
+    with tempfile.TemporaryDirectory(prefix="bpr-", dir="/tmp") as tmp:
+        lines = compare([h for h in args.hands.split(",") if h], args.real, base, args.real_runs, cache, Path(tmp),
+                        _commit(), base_commit)
+    load = os.getloadavg()
+    lines[1:1] = ["", f"Machine: {machine_description()}; load average at the end {load[0]:.1f} / {load[1]:.1f} / "
+                      f"{load[2]:.1f}. Command: `python -m benchmarks.bench_pipeline --real {args.real} --hands "
+                      f"{args.hands} --real-runs {args.real_runs}{' --baseline BASE' if base else ''}`."]
+    replace_section(args.out, HEADING, lines, first=True)
+    print("\n".join(lines))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", type=int, default=12, help="procedural objects of the scaling job (one per shard)")
@@ -266,8 +289,16 @@ def main(argv=None) -> int:
     ap.add_argument("--cold", type=int, default=0, help="objects of the cold-cache minimal job (0: skip it)")
     ap.add_argument("--ceiling", type=int, default=0, help="shards of the small job run alone and as two copies at "
                     "once without Ray (0: skip it)")
+    ap.add_argument("--real", type=int, default=0, help="only the default job on the first N objects of "
+                    "manifests/real_dev.jsonl, per hand of --hands, beside --baseline (benchmarks/pipeline_real.py)")
+    ap.add_argument("--hands", default="shadow,leap", help="hands of --real (comma-separated)")
+    ap.add_argument("--baseline", default=None, help="root of another checkout (e.g. a git worktree of main) "
+                    "run beside this one by --real")
+    ap.add_argument("--real-runs", type=int, default=3, help="runs per code and hand of --real")
     ap.add_argument("--out", default="benchmarks/results/pipeline.md")
     args = ap.parse_args(argv)
+    if args.real:
+        return _real(args)
     cfg = JobConfig(count=args.scale, objects_per_shard=1,
                     **({"grasps_per_object": args.grasps} if args.grasps else {}))
     cache = args.cache or os.environ.get("DATAGEN_CACHE") or None

@@ -146,8 +146,11 @@ def row_pieces(row: dict, base: Path) -> ObjectPieces:
     return pieces_from_processed(processed, float(row["object_scale_m"]))
 
 
-def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None) -> list[GraspResult]:
-    """Evaluate rows in this process (one `Evaluator` per hand; ``spare_cores`` as there)."""
+def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None,
+                   evaluators: dict | None = None) -> list[GraspResult]:
+    """Evaluate rows in this process (one `Evaluator` per hand; ``spare_cores`` as there).
+    ``evaluators``: the caller's {(hand, base, config): Evaluator}, kept across calls (the hand
+    loaded and the scenes built once; the caller closes them); None: made and closed here."""
     import torch
 
     from datagen.hands import load_hand
@@ -155,18 +158,20 @@ def _evaluate_rows(rows: list[dict], base: str, cfg_dict: dict, spare_cores=None
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # one core per worker; the epsilon search is small
     cfg = EvalConfig.from_dict(cfg_dict)
-    evaluators: dict[str, Evaluator] = {}
+    own, cfg_key = evaluators is None, cfg.hash()
+    evaluators = {} if own else evaluators
     out = []
     try:
         for row in rows:
-            hand = str(row["hand"])
-            if hand not in evaluators:
-                evaluators[hand] = Evaluator(load_hand(hand, base=base), cfg, spare_cores=spare_cores)
-            out.append(evaluators[hand].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
-                                                 w_t=row.get("w_t"), table=row_table(row)))
+            key = (str(row["hand"]), str(base), cfg_key)
+            if key not in evaluators:
+                evaluators[key] = Evaluator(load_hand(key[0], base=base), cfg, spare_cores=spare_cores)
+            out.append(evaluators[key].evaluate(row_pieces(row, Path(base)), row_poses(row), str(row["task"]),
+                                                w_t=row.get("w_t"), table=row_table(row)))
     finally:
-        for ev in evaluators.values():
-            ev.close()
+        if own:
+            for ev in evaluators.values():
+                ev.close()
         torch.set_num_threads(threads)  # in the caller's process: its synthesis keeps its threads
     return out
 
@@ -197,15 +202,17 @@ def pool_context() -> mp.context.BaseContext:
 
 
 def evaluate_table(table: pa.Table, cfg: EvalConfig, *, base: str | Path = ".", workers: int = 1,
-                   spare_cores=None) -> pa.Table:
+                   spare_cores=None, evaluators: dict | None = None) -> pa.Table:
     """``table`` with `EVAL_COLUMNS` appended (replaced if present). ``workers`` > 1 splits the
     rows into contiguous chunks evaluated by a process pool (results are identical); with one,
-    ``spare_cores`` (see `Evaluator`) lets a grasp use an idle core."""
+    ``spare_cores`` (see `Evaluator`) lets a grasp use an idle core, and ``evaluators`` (a dict
+    the caller keeps and closes, see `_evaluate_rows`) carries the loaded hand and built scenes
+    from one call to the next (the same verdicts)."""
     names = list(INPUT_COLUMNS) + [c for c in ("w_t", "scene", "support_plane") if c in table.column_names]
     rows = table.select(names).to_pylist()
     cfg_d = cfg.to_dict()
     if workers <= 1 or len(rows) < 2:
-        results = _evaluate_rows(rows, str(base), cfg_d, spare_cores)
+        results = _evaluate_rows(rows, str(base), cfg_d, spare_cores, evaluators)
     else:
         n = min(workers, len(rows))
         bounds = np.linspace(0, len(rows), n + 1).astype(int)

@@ -88,10 +88,15 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
-            eps = link_epsilon(p, n, touching, cfg.contact.mu, normalize=cfg.contact.normalize,
-                               task=None if closure else (task.w_t, task.gamma_deg),
-                               task_origin=None if closure else task_origin).to(energy.dtype)
-            score = score + 1e3 * torch.where(usable, eps, torch.zeros_like(eps))
+            # the epsilon of the usable poses only (the others' is not used): per pose, so the same values
+            rows = usable.nonzero().squeeze(-1)
+            eps = torch.zeros_like(score)
+            if rows.numel():
+                origin = None if closure or task_origin is None else task_origin[rows]
+                eps = eps.index_copy(0, rows, link_epsilon(
+                    p[rows], n[rows], touching[rows], cfg.contact.mu, normalize=cfg.contact.normalize,
+                    task=None if closure else (task.w_t, task.gamma_deg), task_origin=origin).to(energy.dtype))
+            score = score + 1e3 * eps
         return score
 
 

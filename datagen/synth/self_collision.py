@@ -109,7 +109,8 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     out = {"cluster": link, "count": count, "blocks": blocks, "perm": perm.to(dev), "reach": radius[uniq // L] + radius[uniq % L],
            "group_a": (uniq // L).to(dev), "group_b": (uniq % L).to(dev),
            "gather": uniq.numel() <= GATHER_GROUPS_PER_BLOCK * len(blocks),
-           "sizes": sizes, "starts": torch.cumsum(sizes, 0) - sizes, "order": order, "rank": rank}
+           "sizes": sizes, "starts": torch.cumsum(sizes, 0) - sizes, "order": order, "rank": rank,
+           "end_a": pairs[order, 0], "end_b": pairs[order, 1]}  # each pair's spheres, in (group, pair) order
     hand._self_pair_bounds = out
     return out
 
@@ -133,13 +134,14 @@ def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: 
         b, g = (gap < margin_m).nonzero(as_tuple=True)  # (n,) poses and groups whose bounds meet
         n = t["sizes"][g]
         rows = torch.repeat_interleave(b, n)
-        first = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n)
-        pair = t["order"][first + torch.arange(rows.numel(), device=rows.device)]
-        i, j = hand.self_collision_pairs[pair, 0], hand.self_collision_pairs[pair, 1]
-        flat = centres.reshape(-1, 3)
-        d = (flat.index_select(0, rows * S + i) - flat.index_select(0, rows * S + j)).norm(dim=-1)
+        # each candidate's place in the (group, pair) order; its spheres read from there directly
+        at = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n) + torch.arange(rows.numel(),
+                                                                                                    device=rows.device)
+        i, j = t["end_a"][at], t["end_b"][at]
+        flat, base = centres.reshape(-1, 3), rows * S
+        d = (flat.index_select(0, base + i) - flat.index_select(0, base + j)).norm(dim=-1)
         near = d < radii[i] + radii[j] + margin_m  # the narrow phase
-        return rows[near], pair[near]
+        return rows[near], t["order"][at[near]]
 
 
 def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor,

@@ -135,3 +135,27 @@ def test_evaluation_in_a_pool_gives_the_same_rows_and_finds_a_failing_target(wor
         assert [_clean(t.to_pylist()) for t in spawned] == [_clean(t.to_pylist()) for t in one]
     finally:
         torch.set_num_threads(1)
+
+
+def test_one_evaluator_for_every_target_gives_each_targets_own_rows(world, monkeypatch):
+    """`evaluate_rows` keeps one `Evaluator` (the hand loaded once, its scenes) across its targets:
+    every target's rows equal those of `evaluate_table` on that target alone."""
+    import datagen.hands as hands_pkg
+    from datagen.eval.table import evaluate_table
+    from datagen.pipeline import evaluate_rows, synthesize_rows
+    from datagen.tasks import load_task
+
+    objs, cache, hand = world
+    targets = build_targets([BatchObject(objs["box.obj"], (0.07, 0.09), object_id="box"),
+                             BatchObject(objs["ball.obj"], (0.08,), object_id="ball")], grid_resolution=16, cache=cache)
+    _, table = synthesize_rows(hand, targets, load_task("force_closure"), SynthConfig(iters=10, num_directions=16), 2)
+    table = table.set_column(table.schema.get_field_index("object_path"), "object_path",
+                             [[str(objs[r["object_id"] + ".obj"].entry) for r in table.select(["object_id"]).to_pylist()]])
+    cfg = EvalConfig.from_dict(TINY_EVAL)
+    alone = [evaluate_table(t, cfg) for t in evaluate_rows(table, targets, "force_closure", cfg)]  # re-evaluated fresh
+    loads = []
+    real = hands_pkg.load_hand
+    monkeypatch.setattr(hands_pkg, "load_hand", lambda *a, **k: loads.append(a) or real(*a, **k))
+    shared = evaluate_rows(table, targets, "force_closure", cfg)
+    assert len(loads) == 1  # one hand for the three targets
+    assert [_clean(t.to_pylist()) for t in shared] == [_clean(t.to_pylist()) for t in alone]
