@@ -451,6 +451,13 @@ class JobDir:
             if old.get("config_hash") != cfg.hash():
                 new, was = cfg.identity(), dict(old.get("config", {}))
                 diff = sorted(k for k in set(new) | set(was) if k not in EXECUTION_FIELDS and new.get(k) != was.get(k))
+                added = [k for k in diff if k not in was]
+                if added:  # fields a later version added: no settings of this version give that job
+                    raise JobError(f"job directory {self.path} was made by datagen {old.get('code_version', '?')}, "
+                                   f"before {', '.join(added)} existed (config hash "
+                                   f"{str(old.get('config_hash'))[:12]} != {cfg.hash()[:12]}): a job cannot be "
+                                   "resumed across that change; finish it with the version that made it, or run "
+                                   "this one with another --out")
                 diff = diff or ["the resolved recipes (a library default, preset or task YAML changed)"]
                 raise JobError(f"job directory {self.path} holds a different job (config hash "
                                f"{str(old.get('config_hash'))[:12]} != {cfg.hash()[:12]}; fields differing: {diff}); "

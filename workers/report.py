@@ -231,8 +231,10 @@ def _observations_section(obs: pa.Table | None, cfg: dict) -> list[str]:
               f"the camera poses and intrinsics recorded; rendered by {', '.join(renderers) or '-'}; "
               f"{min(pixels) if pixels else 0} to {max(pixels) if pixels else 0} object pixels per view)"
               if views else "; no camera views (`observations.views: 0`)") + ".", "", _OBS_READERS,
-           "A reference learner trained on these pairs, and what it shows: `python examples/learn_grasps.py "
-           "<this directory>` and docs/learning.md, in the datagen repository.", ""]
+           "A reference learner trained on these pairs: `python examples/learn_grasps.py <this directory>` "
+           "(datagen repository; docs/learning.md says what it shows and what it does not). It is an example "
+           "and a measurement of what a small model gets out of such a job, against an object-blind baseline "
+           "on the same test objects, not a research claim.", ""]
     return md
 
 

@@ -47,6 +47,22 @@ def test_different_config_is_refused(tmp_path):
         job.init(JobConfig(**{**cfg.to_dict(), "seed": 7}))
 
 
+def test_a_job_made_before_a_config_field_existed_is_refused_naming_it(tmp_path, monkeypatch):
+    # a job.json of a version without `observations` (issue 46) whose recipes also differ (its
+    # library defaults changed since: its config no longer hashes to this one): refused, naming the
+    # field, the version that made it and what to do, not "re-run with the same settings"
+    monkeypatch.setattr(JobDir, "_rehash", staticmethod(lambda doc: "changed recipes"))
+    job = JobDir(tmp_path / "job")
+    cfg = tiny_config("procedural")
+    job.init(cfg)
+    doc = json.loads((job.path / "job.json").read_text())
+    del doc["config"]["observations"]
+    doc["config_hash"], doc["code_version"] = "0" * 64, "0.1.0+gabc"
+    (job.path / "job.json").write_text(json.dumps(doc))
+    with pytest.raises(JobError, match=r"made by datagen 0\.1\.0\+gabc, before observations existed.*another --out"):
+        job.init(cfg)
+
+
 def test_lock_excludes_a_second_driver(tmp_path):
     a, b = JobDir(tmp_path / "job"), JobDir(tmp_path / "job")
     a.lock()
