@@ -76,16 +76,9 @@ def file_record(path: str | Path) -> dict:
 def check_file(path: Path, record: dict, deep: bool) -> str | None:
     """Why ``path`` does not match its ledger ``record``, or None: missing, another size
     (truncated or grown), an unreadable footer, another row count; ``deep``: another sha256."""
-    try:
-        size = path.stat().st_size
-    except FileNotFoundError:
-        return f"missing (the ledger lists {record.get('rows', '?')} rows, {record.get('bytes', '?')} bytes)"
-    except OSError as exc:
-        return f"cannot be read ({exc.strerror})"
-    want = record.get("bytes")
-    if size != want:
-        kind = "truncated" if isinstance(want, int) and size < want else "changed size"
-        return f"{kind}: {size} bytes, the ledger recorded {want}"
+    why = _size_problem(path, record, f"the ledger lists {record.get('rows', '?')} rows")
+    if why:
+        return why
     try:
         rows = pq.read_metadata(path).num_rows
     except (OSError, pa.ArrowException) as exc:
@@ -102,6 +95,22 @@ def check_file(path: Path, record: dict, deep: bool) -> str | None:
     return None
 
 
+def _size_problem(path: Path, record: dict, listed: str) -> str | None:
+    """Why ``path`` is not ``record["bytes"]`` long (missing, unreadable, truncated, grown), or None;
+    ``listed``: what the record says it holds, for a missing file's message."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        return f"missing ({listed}, {record.get('bytes', '?')} bytes)"
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    want = record.get("bytes")
+    if size != want:
+        kind = "truncated" if isinstance(want, int) and size < want else "changed size"
+        return f"{kind}: {size} bytes, the ledger recorded {want}"
+    return None
+
+
 def text_record(text: str) -> dict:
     """``{"bytes", "lines", "sha256"}`` of a text file's content (UTF-8), as `check_text` checks it."""
     data = text.encode()
@@ -112,15 +121,9 @@ def check_text(path: Path, record: dict) -> str | None:
     """Why the text file ``path`` does not match ``record`` (`text_record`), or None: missing,
     another size, another line count, another sha256. Bounded: a file larger than the record
     says is not read."""
-    try:
-        size = path.stat().st_size
-    except FileNotFoundError:
-        return f"missing (the ledger recorded {record.get('lines', '?')} lines, {record.get('bytes', '?')} bytes)"
-    except OSError as exc:
-        return f"cannot be read ({exc.strerror})"
-    if size != record.get("bytes"):
-        kind = "truncated" if isinstance(record.get("bytes"), int) and size < record["bytes"] else "changed size"
-        return f"{kind}: {size} bytes, the ledger recorded {record.get('bytes')}"
+    why = _size_problem(path, record, f"the ledger recorded {record.get('lines', '?')} lines")
+    if why:
+        return why
     try:
         data = path.read_bytes()
     except OSError as exc:
