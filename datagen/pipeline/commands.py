@@ -188,12 +188,12 @@ def register_hand(sub: argparse._SubParsersAction) -> None:
                        "edited one (check), tune it on procedural objects (calibrate)")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     add_init_and_check(actions)
-    cal = actions.add_parser("calibrate", help="choose the hand's sphere margin by a short synthesis + MuJoCo run "
-                             "on procedural objects; writes the choice into the spec")
+    cal = actions.add_parser("calibrate", help="choose the hand's sphere margin by a short, paired synthesis + "
+                             "MuJoCo run on procedural objects (minutes); writes the choice into the spec")
     cal.add_argument("spec", help="hand spec YAML (rewritten with the choice unless --out is given)")
     cal.add_argument("--out", default=None, help="write the calibrated spec here instead")
-    cal.add_argument("--objects", type=int, default=4, help="procedural objects of the run")
-    cal.add_argument("--grasps", type=int, default=4, help="grasps per object, scale and candidate")
+    cal.add_argument("--objects", type=int, default=6, help="procedural objects of the run")
+    cal.add_argument("--grasps", type=int, default=3, help="grasps per object, scale and candidate")
     cal.add_argument("--seed", type=int, default=0, help="seed of the run")
     cal.add_argument("--cache", default=None, help="objects cache root (default $DATAGEN_CACHE)")
     cal.set_defaults(func=_calibrate, interrupted="the spec is unchanged; rerun the same command")
