@@ -223,3 +223,28 @@ def test_builtin_couplings_are_the_ones_the_mjcf_implies(name):
         {(c.joint, c.leader, round(c.ratio, 6)) for c in spec.couplings}
     expected = {"shadow": 4, "shadow_e3m5": 4, "allegro": 0, "leap": 0}[name]
     assert len(spec.couplings) == expected
+
+
+def test_urdf_links_overlapping_at_rest_are_excluded_from_collision(tmp_path):
+    """A URDF cannot exclude contacts: finger a's tip link reaches back 2 cm into the palm at rest
+    (its grandparent, which MuJoCo's parent filter does not cover), finger b's tip stays clear. The
+    flat model excludes palm/a_tip only, so the resting hand has no self-contact; an MJCF hand's
+    contacts are its own (the built-in Shadow gets no exclude)."""
+    from datagen.hands.mjcf import flatten_hand, resolve_asset
+
+    write_toy_urdf(tmp_path)
+    text = (tmp_path / "toy.urdf").read_text()
+    reach_back = '<collision><origin xyz="0 0 -0.07"/><geometry><box size="0.01 0.01 0.02"/></geometry></collision>'
+    a_tip = text.index('<link name="a_tip">')
+    end = text.index("</link>", a_tip)
+    (tmp_path / "toy.urdf").write_text(text[:end] + reach_back + text[end:])
+    flat = flatten_hand(tmp_path / "toy.urdf", "palm", write=False)
+    m = flat.model
+    pairs = {tuple(sorted((m.body(m.exclude_signature[e] >> 16).name, m.body(m.exclude_signature[e] & 0xFFFF).name)))
+             for e in range(m.nexclude)}
+    assert pairs == {("a_tip", "palm")}
+    data = mujoco.MjData(m)
+    mujoco.mj_forward(m, data)
+    assert data.ncon == 0
+    shadow = load_spec(builtin_spec_path("shadow"))
+    assert flatten_hand(resolve_asset(shadow.mjcf, shadow.source_file), shadow.root_body, write=False).model.nexclude == 0
