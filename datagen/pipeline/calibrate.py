@@ -178,6 +178,8 @@ def calibrate_spec(spec_path: str | Path, *, out: str | Path | None = None, obje
     (`CHEAP_SYNTH`; ``config``: settings on top, as a job's config file gives them;
     `datagen.pipeline.resolve`), starting from the spec's values, and write the spec with the
     choice to ``out`` (default: ``spec_path`` itself)."""
+    import torch
+
     from .batch import build_targets
     from .recipe import merge_layers, resolve
 
@@ -197,12 +199,15 @@ def calibrate_spec(spec_path: str | Path, *, out: str | Path | None = None, obje
     # the evaluation loads the hand again by the rows' name: from a folder where it is pinned
     base = Path(tempfile.mkdtemp(prefix="datagen-calibrate-"))
     pin_hand(spec, base)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # as a job's shard (one CPU each): the same poses, and no oversubscription
     log(f"calibrating {spec.name!r} ({', '.join(fields)}) on {len(objs)} procedural objects x "
         f"{len(CALIBRATION_SCALES)} scales x {grasps} grasps, {recipe.synth.iters} iterations, "
         f"{recipe.synth.seeds_per_grasp} starts, seed {seed}")
     try:
         chosen, runs = search(Bench(hand, recipe, targets, grasps, seed, base), start, log, fields)
     finally:
+        torch.set_num_threads(threads)
         shutil.rmtree(base, ignore_errors=True)
     target = Path(out) if out else spec_path
     header = _leading_comments(spec_path) + [
