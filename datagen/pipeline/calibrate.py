@@ -31,7 +31,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 __all__ = ["CALIBRATION_SCALES", "CHEAP_SYNTH", "Candidate", "Calibration", "MAX_PENETRATION_P90_M", "MIN_LEAD",
-           "SEARCH", "Bench", "calibrate_spec", "format_calibration"]
+           "SEARCH", "Bench", "calibrate_spec", "format_calibration", "search"]
 
 CALIBRATION_SCALES = (0.06, 0.08)       # the default job's scales
 # synthesis of the calibration run: the job's schedule (its seed choice at 120 iterations) cut
@@ -69,10 +69,12 @@ class Candidate:
     def value(self, field: str) -> float:
         return dict(self.settings)[field]
 
-    def line(self) -> str:
+    def line(self, seconds: bool = True) -> str:
+        """One line of figures (``seconds``: with its run time; the spec's comment has none, so the
+        same seed writes the same file)."""
         s = ", ".join(f"{k} {v * 1000:.2f} mm" if k.endswith("_m") else f"{k} {v:g}" for k, v in self.settings)
-        return (f"{s}: {self.successes}/{self.grasps} hold, penetration p90 "
-                f"{self.penetration_p90_m * 1000:.2f} mm ({self.seconds:.0f} s)")
+        return (f"{s}: {self.successes}/{self.grasps} hold, penetration p90 {self.penetration_p90_m * 1000:.2f} mm"
+                + (f" ({self.seconds:.0f} s)" if seconds else ""))
 
 
 @dataclass(frozen=True)
@@ -212,7 +214,7 @@ def calibrate_spec(spec_path: str | Path, *, out: str | Path | None = None, obje
     target = Path(out) if out else spec_path
     header = _leading_comments(spec_path) + [
         f"calibrated by `datagen hand calibrate` (seed {seed}, {len(objs)} procedural objects, "
-        f"{len(targets) * grasps} paired grasps per candidate): " + "; ".join(c.line() for c in runs)
+        f"{len(targets) * grasps} paired grasps per candidate): " + "; ".join(c.line(False) for c in runs)
         + "; chose " + ", ".join(f"{k} = {v}" for k, v in chosen.settings)]
     dump_spec(dataclasses.replace(spec, **dict(chosen.settings)), target, "\n".join(header))
     return Calibration(target, tuple(sorted(start.items())), chosen, tuple(runs), tuple(o.object_id for o in objs))

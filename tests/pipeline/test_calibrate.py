@@ -79,6 +79,9 @@ def test_calibrate_keeps_the_start_against_a_worse_candidate(tiny_calibration):
     assert result.chosen is start and load_spec(spec).sphere_margin_m == 0.0008
     text = spec.read_text()
     assert "calibrated by `datagen hand calibrate`" in text and "6.00 mm" in text
+    spec2, result2 = tiny_calibration(0.0008, (0.006,))  # the same seed: the same figures, the same file
+    assert [c.outcomes for c in result2.candidates] == [c.outcomes for c in result.candidates]
+    assert spec2.read_text() == text
 
 
 def test_calibrate_leaves_a_worse_start_for_the_better_candidate(tiny_calibration):
