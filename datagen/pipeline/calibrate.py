@@ -14,7 +14,9 @@ as the derived value: without evidence nothing moves.
 Searched (`SEARCH`): the sphere margin (`HandSpec.sphere_margin_m`: how far synthesis lets the
 collision spheres sink into an object), from the derived value 0.4 mm either way, one field at
 a time (coordinate search from the incumbent). The choice and every candidate's figures are
-written into the spec. Same seed, same choice.
+written into the spec. Same seed, same choice. The squeeze force and gap, the initial palm
+distance and a curled pre-shape were measured with `Bench` too and moved nothing clearly
+(benchmarks/results/hands.md), so they are not searched.
 """
 
 from __future__ import annotations
