@@ -17,6 +17,9 @@ whose palm origins, at both ends of ``distance_m``, stay `SCENERY_CLEARANCE_M` c
 and a start with a collision sphere in a box is drawn again: no hand starts behind a door, with
 its forearm in a cabinet or below the table (a tabletop object is approached from above and
 from the side).
+``rim`` (the edge pinch of an object lying flat, `_draw_rim`): down the table's up direction,
+the pinch axis across the footprint's narrowest width, the task tips' centre over the
+footprint's centre at the object's mid-height (`datagen.synth.GraspTarget.footprint`).
 Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
 way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
 is drawn from the passed generator.
