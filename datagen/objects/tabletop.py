@@ -22,7 +22,7 @@ import numpy as np
 from datagen.config import Config
 from datagen.errors import ConfigError
 
-__all__ = ["SCENES", "SceneConfig", "StablePose", "stable_poses"]
+__all__ = ["SCENES", "Footprint", "SceneConfig", "StablePose", "footprint", "stable_poses"]
 
 SCENES = ("floating", "tabletop")
 MAX_STABLE_POSES = 16
@@ -121,3 +121,46 @@ def _merge_neighbours(normals: np.ndarray, max_deg: float) -> list[list[int]]:
     for i in range(N):
         groups.setdefault(root(i), []).append(i)
     return sorted(groups.values(), key=lambda g: g[0])
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """An object's extent on its table (metres, object frame): ``height`` its top above the
+    table, ``width`` its narrowest horizontal extent (calipers) and ``length`` its extent at
+    right angles to that, ``up`` (3,) the table's up direction, ``axis`` (3,) the horizontal
+    direction of ``width`` (unit), ``centre`` (3,) the middle of both spans on the table
+    (height 0)."""
+
+    height: float
+    width: float
+    length: float
+    up: np.ndarray
+    axis: np.ndarray
+    centre: np.ndarray
+
+
+def footprint(points: np.ndarray, plane) -> Footprint:
+    """The `Footprint` of an object's points ``(N, 3)`` (m, object frame) on the plane ``[n, d]``
+    (4,) (`StablePose.plane`). The narrowest width is exact: it lies across one edge of the
+    points' convex hull on the table (rotating calipers)."""
+    from scipy.spatial import ConvexHull
+
+    pts = np.asarray(points, dtype=np.float64)
+    n, d = np.asarray(plane[:3], dtype=np.float64), float(plane[3])
+    e1 = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    flat = np.stack([pts @ e1, pts @ e2], -1)  # (N, 2) on the table
+    ring = flat[ConvexHull(flat).vertices]
+    edge = np.roll(ring, -1, axis=0) - ring
+    across = np.stack([-edge[:, 1], edge[:, 0]], -1) / np.linalg.norm(edge, axis=-1, keepdims=True)  # (E, 2)
+    proj = ring @ across.T
+    i = int(np.argmin(proj.max(0) - proj.min(0)))
+    a2 = across[i]
+    b2 = np.array([-a2[1], a2[0]])
+    pa, pb = ring @ a2, ring @ b2
+    mid2 = 0.5 * (pa.max() + pa.min()) * a2 + 0.5 * (pb.max() + pb.min()) * b2
+    axis = a2[0] * e1 + a2[1] * e2
+    centre = mid2[0] * e1 + mid2[1] * e2 - d * n
+    return Footprint(float((pts @ n + d).max()), float(pa.max() - pa.min()), float(pb.max() - pb.min()), n, axis,
+                     centre)

@@ -165,7 +165,8 @@ def _grasp_groups(task, targets: Sequence, n: int, mix, default: str) -> list[tu
         return [(default, n, list(targets))]
     groups: dict[tuple[str, int], list] = {}
     for t in targets:
-        for name, count in mix.counts(float(t.scale), n).items():
+        height = t.footprint.height if t.support_plane is not None else None
+        for name, count in mix.counts(float(t.scale), n, height).items():
             groups.setdefault((name, count), []).append(t)
     return [(name, count, group) for (name, count), group in groups.items()]
 

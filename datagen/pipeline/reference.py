@@ -80,7 +80,7 @@ def render() -> str:
     from datagen.objects.observations import ObservationConfig
     from datagen.objects.tabletop import SceneConfig
     from datagen.synth.config import EnergyWeights, SynthConfig
-    from datagen.tasks.grasp_type import GraspBand, GraspMix
+    from datagen.tasks.grasp_type import FlatBand, GraspBand, GraspMix
     from datagen.wrench.contact import ContactModel
 
     from .recipe import DEFAULT_PRESET, PRESETS
@@ -111,8 +111,10 @@ def render() -> str:
            "Which grasp type (`datagen/tasks/grasp_types/*.yaml`, or a YAML path; docs/synthesis.md) each grasp "
            "of a force-closure task on every fingertip gets: the first band whose `max_scale_m` holds the "
            "object's scale applies, and its `mix` splits each object's grasps between types by share. A grasp "
-           "type's name instead of the mapping (`--grasp-type power`) gives every grasp that type.", ""]
-    md += _table(GraspMix, "") + _table(GraspBand, "bands[].")
+           "type's name instead of the mapping (`--grasp-type power`) gives every grasp that type. With `flat`, "
+           "an object resting on a table with its top at most `max_height_m` above it gets that band's mix "
+           "instead, at any scale (docs/scenes.md).", ""]
+    md += _table(GraspMix, "") + _table(GraspBand, "bands[].") + _table(FlatBand, "flat.")
     md += ["## `scene`: floating or on a table (`SceneConfig`)", "",
            "Where the object is when it is grasped (docs/scenes.md): `floating` (the six-direction test) or "
            "`tabletop`, resting on a table in each of its `stable_poses` most probable stable poses (the lift "

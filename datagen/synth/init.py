@@ -17,6 +17,9 @@ whose palm origins, at both ends of ``distance_m``, stay `SCENERY_CLEARANCE_M` c
 and a start with a collision sphere in a box is drawn again: no hand starts behind a door, with
 its forearm in a cabinet or below the table (a tabletop object is approached from above and
 from the side).
+``rim`` (the edge pinch of an object lying flat, `_draw_rim`): down the table's up direction,
+the pinch axis across the footprint's narrowest width, the task tips' centre over the
+footprint's centre at the object's mid-height (`datagen.synth.GraspTarget.footprint`).
 Joints start at the hand's open pose, or with ``curl`` > 0 each finger's flexion joints part of the
 way to their limit (:func:`curled_joints`: a hook, for grasps that wrap round a handle). Everything
 is drawn from the passed generator.
@@ -167,6 +170,8 @@ def _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery):
     def rand(*shape):
         return torch.rand(*shape, generator=generator, dtype=torch.float64).to(dev, dt)
 
+    if init_cfg.kind == "rim":
+        return _draw_rim(hand, targets, object_index, init_cfg, rand, tip_index)
     fingertips = init_cfg.kind == "approach" and init_cfg.aim == "fingertips"
     origin = torch.empty(B, 3, dtype=dt, device=dev)
     normal = torch.empty(B, 3, dtype=dt, device=dev)
@@ -219,3 +224,34 @@ def _draw(hand, targets, object_index, init_cfg, generator, tip_index, scenery):
         shift = origin - fingertip_centre(hand, root, joints, tip_index)
         root = torch.cat([root[:, :3] + shift, root[:, 3:]], -1)
     return root, joints
+
+
+def _draw_rim(hand, targets, object_index, init_cfg, rand, tip_index):
+    """One draw of ``rim`` starts: the palm comes down the table's up direction (tilted by up to
+    ``tilt_deg``) with the pinch axis (thumb tip minus the other task tips, at the initial
+    joints) across the footprint's narrowest width (either way, rolled by up to ``roll_deg``),
+    the task tips' centre ``distance_m`` above the object's mid-height over the footprint's
+    centre (jittered by up to ``offset_m`` on the table): thumb and fingers open on opposite
+    rims of an object lying flat (`datagen.synth.GraspTarget.footprint`)."""
+    B = object_index.shape[0]
+    dt, dev = hand.dtype, hand.device
+    up, axis, centre = (torch.empty(B, 3, dtype=dt, device=dev) for _ in range(3))
+    for k, target in enumerate(targets):
+        sel = (object_index == k).nonzero().squeeze(-1)
+        if sel.numel():
+            fp = target.footprint
+            up[sel] = torch.as_tensor(fp.up, dtype=dt, device=dev)
+            axis[sel] = torch.as_tensor(fp.axis, dtype=dt, device=dev)
+            centre[sel] = torch.as_tensor(fp.centre + 0.5 * fp.height * fp.up, dtype=dt, device=dev)
+    lo, hi = init_cfg.distance_m
+    lateral = _rotate_about(axis, up, 2 * math.pi * rand(B))
+    origin = centre + up * (lo + (hi - lo) * rand(B))[:, None] + lateral * (init_cfg.offset_m * (2 * rand(B) - 1))[:, None]
+    tilt_axis = _rotate_about(axis, up, 2 * math.pi * rand(B))
+    approach = _rotate_about(-up, tilt_axis, math.radians(init_cfg.tilt_deg) * (2 * rand(B) - 1))
+    sign = torch.where(rand(B) < 0.5, -1.0, 1.0).to(dt)[:, None]
+    thumb = _rotate_about(axis * sign, up, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
+    joints = (curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose).expand(B, -1).clone()
+    pinch = _pinch_vector(hand, joints[0], tip_index)
+    root = root_from_palm(hand, origin, approach, thumb, pinch)
+    shift = origin - fingertip_centre(hand, root, joints, tip_index)
+    return torch.cat([root[:, :3] + shift, root[:, 3:]], -1), joints

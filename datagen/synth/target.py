@@ -91,6 +91,16 @@ class GraspTarget:
                                process=False)
         return np.asarray(mesh.center_mass, dtype=np.float64) * self.scale
 
+    @functools.cached_property
+    def footprint(self):
+        """Its `datagen.objects.tabletop.Footprint` on its table (m); a floating target's on a
+        plane under its lowest point along the object frame's z."""
+        from datagen.objects.tabletop import footprint
+
+        verts = self.sdf.vertices.detach().cpu().double().numpy() * self.scale
+        plane = self.support_plane if self.support_plane is not None else (0.0, 0.0, 1.0, -float(verts[:, 2].min()))
+        return footprint(verts, plane)
+
     def on_table(self, pose) -> "GraspTarget":
         """This target resting on a table in ``pose`` (a `datagen.objects.tabletop.StablePose`)."""
         return replace(self, scene="tabletop", stable_pose=int(pose.index),

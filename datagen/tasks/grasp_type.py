@@ -29,7 +29,7 @@ from datagen.config import Config
 from datagen.errors import ConfigError
 from datagen.tasks.spec import builtin_names, builtin_or_file
 
-__all__ = ["CONTACT_MODES", "CONTACT_ROLES", "GRASP_TYPE_DIR", "TASK_GRASP_TYPE", "GraspBand", "GraspMix",
+__all__ = ["CONTACT_MODES", "CONTACT_ROLES", "GRASP_TYPE_DIR", "TASK_GRASP_TYPE", "FlatBand", "GraspBand", "GraspMix",
            "GraspType", "builtin_grasp_types", "load_grasp_type"]
 
 GRASP_TYPE_DIR = Path(__file__).parent / "grasp_types"
@@ -99,12 +99,30 @@ class GraspBand(Config):
 
 
 @dataclass(frozen=True)
+class FlatBand(Config):
+    """The grasp types of an object lying flat on a table: its top at most ``max_height_m`` above
+    the table in its stable pose (`datagen.objects.tabletop.Footprint`), whatever its scale."""
+
+    max_height_m: float = 0.04  #: m, the highest top above the table that counts as flat
+    mix: Mapping[str, float] = field(default_factory=lambda: {"precision": 1.0})  #: type name -> share of the grasps
+
+    def __post_init__(self):
+        if not (math.isfinite(self.max_height_m) and self.max_height_m > 0):
+            raise ConfigError(f"grasp_types.flat: max_height_m must be a positive number of metres, got {self.max_height_m}")
+        GraspBand(mix=self.mix)  # the same check of the shares
+
+
+@dataclass(frozen=True)
 class GraspMix(Config):
     """Which grasp types a force-closure task's grasps get, by object size (the recipe's
     ``grasp_types``): the first band whose ``max_scale_m`` holds the object's scale applies, and
-    its ``mix`` splits each object's grasps between types (largest remainder, in the mix's order)."""
+    its ``mix`` splits each object's grasps between types (largest remainder, in the mix's order);
+    with ``flat``, an object resting on a table no higher than its ``max_height_m`` gets its mix
+    instead, at any scale."""
 
     bands: tuple[GraspBand, ...] = (GraspBand(),)  #: by increasing max_scale_m, the last one open (null)
+    #: tabletop objects lying flat (their top at most max_height_m above the table) get this mix instead of the bands' (null: the bands for every object)
+    flat: FlatBand | None = None
 
     def __post_init__(self):
         if not self.bands or self.bands[-1].max_scale_m is not None:
@@ -112,7 +130,7 @@ class GraspMix(Config):
         sizes = [b.max_scale_m for b in self.bands[:-1]]
         if any(s is None for s in sizes) or sizes != sorted(sizes) or len(set(sizes)) != len(sizes):
             raise ConfigError(f"grasp_types.bands: max_scale_m must increase, got {sizes}")
-        for b in self.bands:
+        for b in (*self.bands, *([self.flat] if self.flat is not None else [])):
             for name in b.mix:
                 load_grasp_type(name)  # an unknown type is refused here, naming it
 
@@ -124,13 +142,17 @@ class GraspMix(Config):
     def types(self) -> list[str]:
         """Every grasp type the bands use (share > 0), in order of first use."""
         out: list[str] = []
-        for b in self.bands:
+        for b in (*self.bands, *([self.flat] if self.flat is not None else [])):
             out += [k for k, v in b.mix.items() if v > 0 and k not in out]
         return out
 
-    def counts(self, scale: float, n: int) -> dict[str, int]:
-        """Grasps of each type (share > 0) for ``n`` grasps on an object of ``scale`` m."""
-        band = next(b for b in self.bands if b.max_scale_m is None or scale <= b.max_scale_m + 1e-9)
+    def counts(self, scale: float, n: int, height_m: float | None = None) -> dict[str, int]:
+        """Grasps of each type (share > 0) for ``n`` grasps on an object of ``scale`` m, resting
+        on a table with its top ``height_m`` above it (None: floating)."""
+        if self.flat is not None and height_m is not None and height_m <= self.flat.max_height_m + 1e-9:
+            band = self.flat
+        else:
+            band = next(b for b in self.bands if b.max_scale_m is None or scale <= b.max_scale_m + 1e-9)
         mix = [(k, v) for k, v in band.mix.items() if v > 0]
         raw = [v * n for _, v in mix]
         out = [int(math.floor(x)) for x in raw]

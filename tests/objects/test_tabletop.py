@@ -90,3 +90,24 @@ def test_scene_config_checks_its_fields():
         SceneConfig(kind="table")
     with pytest.raises(ConfigError, match="stable_poses"):
         SceneConfig(kind="tabletop", stable_poses=0)
+
+
+def test_footprint_of_a_box_on_a_tilted_table_is_its_hand_measured_extent():
+    """A 6 x 4 x 2 cm box on its largest face, the object frame turned at random: the footprint
+    is 2 cm high, 4 cm wide across the box's y edge, 6 cm long, centred under the box."""
+    from scipy.spatial.transform import Rotation
+
+    from datagen.objects.tabletop import footprint
+
+    box = trimesh.creation.box([0.06, 0.04, 0.02])
+    R = Rotation.random(random_state=3).as_matrix()
+    verts = (box.vertices + [0.01, -0.02, 0.03]) @ R.T  # the box, moved and turned in the object frame
+    up = R @ [0, 0, 1.0]
+    plane = np.array([*up, -0.02])  # its bottom face (z = 0.02 before turning) is the table
+    fp = footprint(verts, plane)
+    assert fp.height == pytest.approx(0.02, abs=1e-9)
+    assert fp.width == pytest.approx(0.04, abs=1e-9) and fp.length == pytest.approx(0.06, abs=1e-9)
+    assert abs(fp.axis @ (R @ [0, 1.0, 0])) == pytest.approx(1.0, abs=1e-9)
+    assert fp.axis @ up == pytest.approx(0.0, abs=1e-12)
+    assert fp.centre == pytest.approx(R @ [0.01, -0.02, 0.02], abs=1e-9)  # under the box's centre, on the table
+    assert fp.centre @ up + plane[3] == pytest.approx(0.0, abs=1e-12)

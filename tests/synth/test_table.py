@@ -116,3 +116,53 @@ def test_synthesis_on_the_table_keeps_the_hand_above_it(shadow, box_targets):
         height = plane_distance(centres.double(), plane) - radii.double()
         assert height.amin() > 0  # every sphere above the table (it keeps TABLE_CLEARANCE_M beyond its margin)
     assert float(res.tip_distance.abs().amax(-1).min()) < 0.01  # while reaching for the box
+
+
+def test_edge_pinch_starts_straddle_a_flat_box_from_above(shadow, box_targets):
+    """The edge pinch's ``rim`` starts on a 6 x 4 x 2 cm box lying flat: the pinch axis (thumb tip
+    minus the other tips) across the box's 4 cm width within the roll jitter, the tips' centre
+    over the box's centre at its mid-height (plus distance_m), the thumb and the fingers outside
+    opposite rims, the palm above the box's top."""
+    from datagen.synth.init import fingertip_centre
+    from datagen.tasks import load_grasp_type
+
+    _, on_table = box_targets
+    task = load_task("force_closure")
+    kind = load_grasp_type("edge_pinch")
+    init = kind.apply_init(task.init)
+    sc = Scenery.for_task(task, [on_table], CPU, torch.float32, sphere_margin_m=0.0)
+    idx = torch.zeros(64, dtype=torch.long)
+    root, joints = initial_poses(shadow, [on_table], idx, init, torch.Generator().manual_seed(0), scenery=sc)
+    fp = on_table.footprint
+    assert fp.height == pytest.approx(0.02, abs=1e-5) and fp.width == pytest.approx(0.04, abs=1e-5)
+    up, axis, centre = (torch.tensor(v, dtype=torch.float32) for v in (fp.up, fp.axis, fp.centre))
+    tips = shadow.fingertip_points(root, joints)  # (B, 5, 3), the thumb first
+    pinch = tips[:, 0] - tips[:, 1:].mean(1)
+    p = pinch / pinch.norm(dim=-1, keepdim=True)
+    assert torch.all((p @ up).abs() < 1e-4)  # horizontal
+    assert torch.all((p @ axis).abs() > np.cos(np.radians(init.roll_deg)) - 1e-4)  # across the width
+    mid = fingertip_centre(shadow, root, joints, None)
+    lift = (mid - centre) @ up - fp.height / 2
+    assert torch.all(lift > init.distance_m[0] - 1e-4) and torch.all(lift < init.distance_m[1] + 1e-4)
+    side = (mid - centre) - ((mid - centre) @ up)[:, None] * up
+    assert torch.all(side.norm(dim=-1) < init.offset_m + 1e-4)
+    assert torch.all(((tips[:, 0] - centre) * p).sum(-1) > fp.width / 2)  # the thumb beyond one rim
+    assert torch.all(((tips[:, 1:].mean(1) - centre) * p).sum(-1) < -fp.width / 2)  # the fingers beyond the other
+    palm = shadow.palm_frame(root, joints)
+    assert torch.all(plane_distance(palm.origin, torch.tensor(on_table.support_plane)) > fp.height)
+
+
+def test_a_flat_object_on_the_table_gets_the_flat_band_and_floating_the_bands(box_targets):
+    """The job's choice per target (`datagen.pipeline.batch`): the 2 cm high box on the table is
+    flat (the dataset preset's edge pinch), the same box floating or a 4 cm limit's taller one not."""
+    from datagen.pipeline.batch import _grasp_groups
+    from datagen.pipeline.recipe import resolve
+
+    floating, on_table = box_targets
+    task = load_task("force_closure")
+    mix = resolve("shadow", "force_closure").grasp_types
+    groups = _grasp_groups(task, [floating, on_table], 2, mix, "precision")
+    assert [(name, count, [t.scene for t in ts]) for name, count, ts in groups] == [
+        ("precision", 2, ["floating"]), ("edge_pinch", 2, ["tabletop"])]
+    low = type(mix).from_dict({**mix.to_dict(), "flat": {"max_height_m": 0.019, "mix": {"edge_pinch": 1}}})
+    assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, low, "precision")] == ["precision"]

@@ -7,7 +7,8 @@ from datagen.tasks import GraspMix, GraspType, builtin_grasp_types, load_grasp_t
 
 
 def test_builtin_grasp_types_load_and_name_their_contacts():
-    assert {"precision", "power"} <= set(builtin_grasp_types())
+    assert {"precision", "power", "edge_pinch"} <= set(builtin_grasp_types())
+    assert not load_grasp_type("edge_pinch").extra_contacts and load_grasp_type("edge_pinch").init["kind"] == "rim"
     assert not load_grasp_type("precision").extra_contacts
     power = load_grasp_type("power")
     assert power.role("palm") == "pull" and power.role("phalanges") in ("pull", "candidate")
@@ -50,6 +51,28 @@ def test_mix_counts_by_size_and_share():
     assert mix.types() == ["precision", "power"]
     assert GraspMix.single("power").counts(0.06, 5) == {"power": 5}
     assert GraspMix.from_dict(mix.to_dict()) == mix
+
+
+def test_flat_band_takes_objects_lying_flat_on_a_table_at_any_scale():
+    mix = GraspMix.from_dict({"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1}}, {"mix": {"power": 1}}],
+                              "flat": {"max_height_m": 0.04, "mix": {"edge_pinch": 1}}})
+    assert mix.counts(0.06, 2, 0.03) == {"edge_pinch": 2} and mix.counts(0.12, 2, 0.03) == {"edge_pinch": 2}
+    assert mix.counts(0.06, 2, 0.04) == {"edge_pinch": 2}  # the bound is inclusive
+    assert mix.counts(0.06, 2, 0.041) == {"precision": 2} and mix.counts(0.12, 2, 0.05) == {"power": 2}
+    assert mix.counts(0.06, 2) == {"precision": 2}  # floating: the bands
+    assert mix.types() == ["precision", "power", "edge_pinch"]
+    assert GraspMix.from_dict(mix.to_dict()) == mix
+    assert GraspMix().counts(0.06, 2, 0.01) == {"precision": 2}  # no flat band: the bands for every object
+
+
+@pytest.mark.parametrize("flat, match", [
+    ({"max_height_m": 0, "mix": {"edge_pinch": 1}}, "max_height_m must be a positive"),
+    ({"mix": {"edge_pinch": 0.5}}, "summing to 1"),
+    ({"mix": {"claw": 1}}, "unknown grasp type 'claw'"),
+])
+def test_bad_flat_band_is_named(flat, match):
+    with pytest.raises(ConfigError, match=match):
+        GraspMix.from_dict({"bands": [{"mix": {"precision": 1}}], "flat": flat})
 
 
 @pytest.mark.parametrize("bands, match", [
