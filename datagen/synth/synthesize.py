@@ -346,6 +346,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
     gt = load_grasp_type(cfg.grasp_type)
+    cfg = gt.apply_synth(cfg)  # the type's own synthesis settings (a sphere margin, a term's weight)
     b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed), gt)
     x, extras, initial = _optimize(hand, targets, task, cfg, b, callback, threads)
     t_opt = time.perf_counter() - t0
