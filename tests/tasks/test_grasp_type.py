@@ -76,3 +76,19 @@ def test_mix_counts_by_size_and_share():
 def test_bad_mix_is_named(bands, match):
     with pytest.raises(ConfigError, match=match):
         GraspMix.from_dict({"bands": bands})
+
+
+def test_a_types_margin_scale_takes_part_of_each_hands_margin():
+    """``sphere_margin_scale`` (a type's ``synth:``) multiplies the hand spec's margin (Shadow 1.5 mm,
+    Allegro 0.5 mm); an explicit ``sphere_margin_m`` wins; out of [0, 1] is refused."""
+    from types import SimpleNamespace
+
+    from datagen.synth.config import SynthConfig
+
+    t = GraspType.from_dict({"name": "shallow", "synth": {"sphere_margin_scale": 0.5}})
+    shadow, allegro = SimpleNamespace(sphere_margin_m=0.0015), SimpleNamespace(sphere_margin_m=0.0005)
+    assert t.apply_synth(SynthConfig()).for_hand(shadow).sphere_margin_m == pytest.approx(0.00075, abs=1e-12)
+    assert t.apply_synth(SynthConfig()).for_hand(allegro).sphere_margin_m == pytest.approx(0.00025, abs=1e-12)
+    assert t.apply_synth(SynthConfig(sphere_margin_m=0.001)).for_hand(shadow).sphere_margin_m == 0.001
+    with pytest.raises(ConfigError, match="sphere_margin_scale"):
+        SynthConfig(sphere_margin_scale=1.5)
