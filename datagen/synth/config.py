@@ -55,7 +55,8 @@ class SynthConfig(Config):
     squeeze_kp: float = 5.0  #: position-actuator stiffness the squeeze is computed for, N m/rad: the evaluation's
                              #: for this hand (its protocol's gains), set by the resolver (not a setting of its own)
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
-    sphere_margin_m: float | None = None  #: m collision spheres may sink into the object (None: the hand spec's)
+    sphere_margin_m: float | None = None  #: m collision spheres may sink into the object (None: the hand spec's times sphere_margin_scale)
+    sphere_margin_scale: float = 1.0  #: the hand spec's sphere margin is multiplied by this where sphere_margin_m is null (a grasp type's setting)
     exact_contacts: bool = False  #: exact mesh SDF for contacts while optimizing (final contacts always exact)
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
@@ -64,6 +65,7 @@ class SynthConfig(Config):
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
+    penetration_pieces: bool = False  #: penetration terms also against the object's convex pieces (what MuJoCo collides: synth/pieces.py)
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)
     task: str = ""  #: the task whose ``synth:`` block this config holds (set by the resolver; "" none)
     grasp_type: str = "precision"  #: the grasp type (name or YAML, datagen/tasks/grasp_types) of the batch's contact set (set per batch from the recipe's grasp_types)
@@ -72,7 +74,7 @@ class SynthConfig(Config):
         """This config with the hand's own values where it leaves them open (``sphere_margin_m``:
         how far the hand's collision spheres overshoot its collision geometry, from its spec)."""
         if self.sphere_margin_m is None:
-            return dataclasses.replace(self, sphere_margin_m=float(hand.sphere_margin_m))
+            return dataclasses.replace(self, sphere_margin_m=float(hand.sphere_margin_m) * self.sphere_margin_scale)
         return self
 
     def check_task(self, task) -> None:
@@ -86,6 +88,8 @@ class SynthConfig(Config):
     def __post_init__(self):
         if self.sphere_margin_m is not None and not 0 <= self.sphere_margin_m < 0.01:
             raise ConfigError(f"SynthConfig.sphere_margin_m must be in [0, 0.01) m or null, got {self.sphere_margin_m}")
+        if not (math.isfinite(self.sphere_margin_scale) and 0 <= self.sphere_margin_scale <= 1):
+            raise ConfigError(f"SynthConfig.sphere_margin_scale must be in [0, 1], got {self.sphere_margin_scale}")
         if not (math.isfinite(self.self_pair_skin_m) and self.self_pair_skin_m >= 0):
             raise ConfigError(f"SynthConfig.self_pair_skin_m must be a finite number >= 0 m, got {self.self_pair_skin_m}")
         if not (math.isfinite(self.pinch_antipodal) and self.pinch_antipodal >= 0):

@@ -118,7 +118,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None, pieces=None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -129,7 +129,9 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     ``scenery``: static boxes the spheres must also stay out of (penetration terms);
     ``links`` ``(L,)``: a grasp type's extra contact links, the palm and phalanges, at their
     nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
-    distance term pulls.
+    distance term pulls; ``pieces``: the targets' convex pieces (`GraspTarget.pieces`, same
+    order), each sphere's penetration the deeper of the surface's and the pieces' (None: the
+    surface's).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -138,6 +140,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
     pen = sphere_penetration(targets, object_index, centres, radii - sphere_margin)  # (B, S) m
+    if pieces is not None:  # what MuJoCo collides: the pieces stick out of a concave surface
+        pen = torch.maximum(pen, sphere_penetration(pieces, object_index, centres, radii - sphere_margin))
     pen_sq = (pen * pen).sum(-1)
     if scenery is not None:
         env = scenery.penetration(object_index, centres, radii - sphere_margin)  # (B, S) m

@@ -202,6 +202,7 @@ class _Batch:
     directions: torch.Tensor  # (K, 6) wrench directions
     links: torch.Tensor | None = None  # (L,) the grasp type's extra contact links (palm, phalanges); None: fingertips only
     link_pull: torch.Tensor | None = None  # (L,) bool: those the distance term pulls onto the surface
+    pieces: list | None = None  # the targets' convex pieces for the penetration terms (cfg.penetration_pieces); None: the surface only
 
 
 def _grasp_links(hand, grasp_type, finger_index) -> tuple[torch.Tensor | None, torch.Tensor | None]:
@@ -235,8 +236,9 @@ def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, 
     scenery = Scenery.for_task(task, targets, dev, dt, cfg.sphere_margin_m)
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
+    pieces = [t.pieces() for t in targets] if cfg.penetration_pieces else None
     return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,
-                  root, hand.apply_couplings(joints), directions, links, pull)
+                  root, hand.apply_couplings(joints), directions, links, pull, pieces)
 
 
 def _energy_on(hand, targets, task, cfg, b: _Batch):
@@ -252,7 +254,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull)
+                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces)
             terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
@@ -309,7 +311,7 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
-                                  link_pull=b.link_pull)
+                                  link_pull=b.link_pull, pieces=b.pieces)
         pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
                                     cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
                                     finger_joint_mask(hand), mount=_mount(task, targets, idx),
@@ -317,7 +319,7 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, idx, root_f, j, b.tip_spheres, self_collision=False,
-                                     scenery=b.scenery).max_penetration
+                                     scenery=b.scenery, pieces=b.pieces).max_penetration
 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     cat = lambda j: torch.cat([root_f, j], -1)  # noqa: E731
@@ -342,10 +344,10 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
     t0 = time.perf_counter()
     cfg.check_task(task)
-    cfg = cfg.for_hand(hand)
+    gt = load_grasp_type(cfg.grasp_type)
+    cfg = gt.apply_synth(cfg).for_hand(hand)  # the type's own synthesis settings, then the hand's margin
     threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
-    gt = load_grasp_type(cfg.grasp_type)
     b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed), gt)
     x, extras, initial = _optimize(hand, targets, task, cfg, b, callback, threads)
     t_opt = time.perf_counter() - t0

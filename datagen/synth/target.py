@@ -39,6 +39,7 @@ class GraspTarget:
     stable_pose: int = -1  #: tabletop: the rank of its stable pose (0 the most probable); -1 floating
     support_plane: tuple | None = None  #: tabletop: (4,) ``[n, d]``, height above the table ``n . x + d`` (m, object frame)
     table_pose: tuple | None = None  #: tabletop: (7,) the object's pose in the table frame ``[x y z qw qx qy qz]`` (m)
+    piece_paths: tuple = ()  #: the convex pieces MuJoCo collides (OBJ, normalized units); () unknown
 
     @classmethod
     def from_mesh(cls, mesh: trimesh.Trimesh, scale: float, object_id: str, *, object_path: str = "",
@@ -79,8 +80,19 @@ class GraspTarget:
         if not processed.ok:
             raise ValueError(f"{processed.object_id}: object failed processing ({processed.reason}): {processed.message}")
         mesh = trimesh.load(Path(processed.surface_path), force="mesh", process=False)
-        return cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
-                             mesh_sha256=processed.mesh_sha256, cache_grid=cache_grid, **kw)
+        target = cls.from_mesh(mesh, scale, processed.object_id, object_path=str(processed.entry),
+                               mesh_sha256=processed.mesh_sha256, cache_grid=cache_grid, **kw)
+        return replace(target, piece_paths=tuple(str(p) for p in processed.piece_paths))
+
+    def pieces(self) -> "GraspTarget":
+        """This target with its convex pieces' distance grid as ``grid`` (`datagen.synth.pieces`:
+        what the penetration terms see with ``SynthConfig.penetration_pieces``); itself when its
+        pieces are unknown or it has no grid."""
+        if not self.piece_paths or self.grid is None:
+            return self
+        from datagen.synth.pieces import pieces_grid
+
+        return replace(self, grid=pieces_grid(self.piece_paths, self.grid))
 
     @functools.cached_property
     def centre_of_mass(self) -> np.ndarray:

@@ -36,15 +36,25 @@ def _palm_gap(hand, target, grasp):
 
 
 @pytest.mark.slow
-def test_power_grasp_pulls_the_palm_onto_the_object(hand, balls):
+def test_power_grasp_pulls_the_palm_onto_the_object(hand, balls, tmp_path):
     """Same initial poses (same seed): every power grasp ends with the palm nearer the ball than
-    the fingertip grasp from the same start (after 60 iterations, -0.6-2.0 mm against 0.1-3.0 mm)."""
+    the fingertip grasp from the same start (after 60 iterations, -0.6-2.0 mm against 0.1-3.0 mm).
+    A type's ``init`` (here a pre-curl) starts from the same roots with its own joints."""
+    from datagen.synth.init import curled_joints
+
     task = load_task("force_closure")
     big = balls[1:]  # radius 6.9 cm
     prec = synthesize(hand, big, task, CFG, 4)
-    power = synthesize(hand, big, task, dataclasses.replace(CFG, grasp_type="power"), 4)
+    open_power = tmp_path / "power_open.yaml"
+    open_power.write_text("name: power_open\ncontacts: {palm: pull, phalanges: candidate}\n")
+    power = synthesize(hand, big, task, dataclasses.replace(CFG, grasp_type=str(open_power)), 4)
     assert torch.equal(prec.initial, power.initial)
-    assert prec.grasp_type == "precision" and power.grasp_type == "power"
+    assert prec.grasp_type == "precision" and power.grasp_type == "power_open"
+    curled = tmp_path / "power_curled.yaml"  # a type's init: the same roots, the fingers pre-curled
+    curled.write_text("name: power_curled\ncontacts: {palm: pull, phalanges: candidate}\ninit: {curl: 0.3}\n")
+    c = synthesize(hand, big, task, dataclasses.replace(CFG, grasp_type=str(curled), iters=1), 4)
+    assert torch.equal(c.initial[:, :7], prec.initial[:, :7]) and c.grasp_type == "power_curled"
+    assert torch.allclose(c.initial[:, 7:], curled_joints(hand, 0.3).expand(4, -1))
     g_prec, g_pow = _palm_gap(hand, big[0], prec.grasp), _palm_gap(hand, big[0], power.grasp)
     assert bool((g_pow < g_prec).all()) and float(g_pow.median()) < 0.002
     assert "link_distance" in power.energies and "link_distance" not in prec.energies

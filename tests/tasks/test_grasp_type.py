@@ -20,7 +20,8 @@ def test_builtin_grasp_types_load_and_name_their_contacts():
     ({"name": "x", "init": {"distance": [0, 1]}}, "unknown init field"),
     ({"name": "task"}, "reserved"),
     ({"name": "a b"}, "simple identifier"),
-    ({"name": "x", "synth": {}}, "synth"),
+    ({"name": "x", "synth": {"seed": 3}}, "set by the job"),
+    ({"name": "x", "extra": {}}, "extra"),
 ])
 def test_bad_grasp_type_is_named(data, match):
     with pytest.raises(ConfigError, match=match):
@@ -38,6 +39,20 @@ def test_grasp_type_yaml_file_and_unknown_name(tmp_path):
     assert init.distance_m == (0.01, 0.02) and init.kind == "surround"
     with pytest.raises(ConfigError, match="unknown grasp type 'pwr'"):
         load_grasp_type("pwr")
+
+
+def test_grasp_type_synth_settings_go_over_the_recipes():
+    from datagen.synth.config import EnergyWeights, SynthConfig
+
+    t = GraspType.from_dict({"name": "hold", "synth": {"weights": {"penetration": 1e6}, "sphere_margin_m": 0.0}})
+    base = SynthConfig(iters=300, seeds_per_grasp=16, sphere_margin_m=0.0015, weights=EnergyWeights(distance=5e3))
+    cfg = t.apply_synth(base)
+    assert cfg.weights.penetration == 1e6 and cfg.weights.distance == 5e3  # merged key by key
+    assert cfg.sphere_margin_m == 0.0 and cfg.seeds_per_grasp == 16 and cfg.iters == 300
+    assert load_grasp_type("precision").apply_synth(base) is base
+    for bad, match in (({"iterz": 10}, "iterz"), ({"weights": {"penetration": -1}}, "penetration")):
+        with pytest.raises(ConfigError, match=match):
+            GraspType.from_dict({"name": "x", "synth": bad}).apply_synth(base)
 
 
 def test_mix_counts_by_size_and_share():
@@ -84,3 +99,19 @@ def test_bad_flat_band_is_named(flat, match):
 def test_bad_mix_is_named(bands, match):
     with pytest.raises(ConfigError, match=match):
         GraspMix.from_dict({"bands": bands})
+
+
+def test_a_types_margin_scale_takes_part_of_each_hands_margin():
+    """``sphere_margin_scale`` (a type's ``synth:``) multiplies the hand spec's margin (Shadow 1.5 mm,
+    Allegro 0.5 mm); an explicit ``sphere_margin_m`` wins; out of [0, 1] is refused."""
+    from types import SimpleNamespace
+
+    from datagen.synth.config import SynthConfig
+
+    t = GraspType.from_dict({"name": "shallow", "synth": {"sphere_margin_scale": 0.5}})
+    shadow, allegro = SimpleNamespace(sphere_margin_m=0.0015), SimpleNamespace(sphere_margin_m=0.0005)
+    assert t.apply_synth(SynthConfig()).for_hand(shadow).sphere_margin_m == pytest.approx(0.00075, abs=1e-12)
+    assert t.apply_synth(SynthConfig()).for_hand(allegro).sphere_margin_m == pytest.approx(0.00025, abs=1e-12)
+    assert t.apply_synth(SynthConfig(sphere_margin_m=0.001)).for_hand(shadow).sphere_margin_m == 0.001
+    with pytest.raises(ConfigError, match="sphere_margin_scale"):
+        SynthConfig(sphere_margin_scale=1.5)
