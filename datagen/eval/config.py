@@ -57,6 +57,13 @@ class EvalConfig(Config):
     impratio: float = 10.0                           # frictional-to-normal constraint impedance ratio (>= 1)
     noslip_iterations: int = 2                       # MuJoCo's no-slip solver passes per step (0 off)
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2: off, the hold test applies its own forces
+    # MuJoCo's multi-contact convex collision (multiccd). DexGraspBench's MuJoCo 3.3.2 has it off
+    # (an enable flag); MuJoCo 4 turns it on by default (a disable flag), which nearly doubles the
+    # contacts of a held LEAP grasp (11.2 against 6.0 per hold step, 67 against 46 constraint rows)
+    # and costs the peer's own loop 1.5x per step. Off: the peer's contacts and constraint rows,
+    # and its verdicts on 120 of 120 grasps (benchmarks/results/eval.md).
+    multiccd: bool = False
+    island: bool = False                             # MuJoCo's island solver (on by default in MuJoCo 4, off in the peer's 3.3.2)
     # --- contacts: set on every geom of the scene (hand and object) ---
     condim: int = 4                                  # contact dimensionality: 1, 3, 4 (with torsional friction) or 6
     friction: tuple[float, float] = (0.6, 0.02)   # sliding, torsional (rolling stays 1e-4)

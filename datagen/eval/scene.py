@@ -156,6 +156,10 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     opt.cone = _CONES[cfg.cone]
     opt.impratio = cfg.impratio
     opt.noslip_iterations = cfg.noslip_iterations
+    if not cfg.multiccd:  # MuJoCo 4 has it on by default, DexGraspBench's 3.3.2 off (EvalConfig)
+        opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_MULTICCD)
+    if not cfg.island:
+        opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
     spec.compiler.degree = False
 
     hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
@@ -166,7 +170,7 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     base.add_freejoint(name="hand_free")
     # the scene keeps its own solver options and sizes; the hand's user-field sizes are adopted
     for k in ("timestep", "gravity", "integrator", "cone", "impratio", "noslip_iterations", "iterations",
-              "tolerance", "ls_iterations", "solver", "jacobian"):
+              "tolerance", "ls_iterations", "solver", "jacobian", "disableflags", "enableflags"):
         setattr(hand_spec.option, k, getattr(spec.option, k))
     hand_spec.njmax, hand_spec.nconmax = spec.njmax, spec.nconmax
     for k in ("nuser_jnt", "nuser_site", "nuser_tendon", "nuser_actuator", "nuser_sensor", "nuser_body",
