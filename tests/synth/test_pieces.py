@@ -105,7 +105,7 @@ def test_penetration_pieces_keeps_the_hand_out_of_pieces_that_stick_out(tmp_path
     t = dataclasses.replace(GraspTarget.from_mesh(ball, 0.1, "ball", grid_resolution=32),
                             piece_paths=(str(tmp_path / "piece.obj"),))
     hand = load_hand("shadow")
-    cfg = SynthConfig(iters=80, seeds_per_grasp=1, num_directions=16, seed=2, grasp_type="power")
+    cfg = SynthConfig(iters=80, seeds_per_grasp=1, num_directions=16, seed=2)  # precision: no type settings
     task = load_task("force_closure")
     depth = {}
     for on in (False, True):
