@@ -74,7 +74,8 @@ def synthesize(hand: str = "shadow", obj: str | Path = "", task: str | Path = "f
     if not evaluate:
         targets = build_targets(objects, grid_resolution=recipe.grid_resolution, cache=cache, device=device,
                                 scene=recipe.scene)
-        return synthesize_rows(model, targets, recipe.load_task(), recipe.synth, n, grasp_types=recipe.grasp_types)[1]
+        return synthesize_rows(model, targets, recipe.load_task(), recipe.synth, n, grasp_types=recipe.grasp_types,
+                               type_synth=recipe.grasp_type_synth)[1]
     out = run_batch(objects, model, [recipe], grasps_per_object=n, cache=cache, device=device)
     if out.failures:
         raise ValueError("; ".join(f"{f['stage']}: {f['message']}" for f in out.failures))

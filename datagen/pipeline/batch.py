@@ -139,20 +139,25 @@ def _stable_poses(target, scene) -> list | None:
 
 
 def synthesize_rows(hand, targets: Sequence, task, cfg, grasps_per_object: int, *, grasp_types=None,
-                    splits: Mapping[str, str] | None = None, callback=None):
+                    type_synth: Mapping[str, Mapping] | None = None, splits: Mapping[str, str] | None = None,
+                    callback=None):
     """``(results, table)``: ``grasps_per_object`` grasps on every target (`datagen.synth.synthesize`,
     seeded by ``cfg.seed``) and their rows (``grasps`` schema, `datagen.synth.rows.result_table`).
     ``cfg`` is the task's resolved `SynthConfig` (``resolve(...).synth``); ``grasp_types``: the
     recipe's `datagen.tasks.GraspMix` (None: ``cfg.grasp_type`` for every grasp), applied to a
     force-closure task on every fingertip: one batch per grasp type and grasp count (the targets
-    in order, so one type gives the one batch of every target), ``results`` in that order.
+    in order, so one type gives the one batch of every target), ``results`` in that order; a
+    type's batch synthesizes with ``type_synth``'s fields for it over ``cfg`` (the recipe's
+    ``grasp_type_synth``: `datagen.pipeline.recipe.for_grasp_type`).
     ``callback(it, ...)`` is the optimizer's per-iteration hook."""
     from datagen.synth import synthesize
     from datagen.synth.rows import result_table
 
+    from .recipe import for_grasp_type
+
     results, tables = [], []
     for name, count, group in _grasp_groups(task, targets, grasps_per_object, grasp_types, cfg.grasp_type):
-        c = cfg if name == cfg.grasp_type else dataclasses.replace(cfg, grasp_type=name)
+        c = for_grasp_type(cfg, name, type_synth)
         result = synthesize(hand, group, task, c, count, callback=callback)
         results.append(result)
         tables.append(result_table(result, group, hand, task, c, splits=splits))
@@ -280,7 +285,8 @@ def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps
 
         try:
             _, table = synthesize_rows(hand, targets, task, synth_cfg, grasps_per_object, splits=splits,
-                                       grasp_types=recipe.grasp_types, callback=moved)
+                                       grasp_types=recipe.grasp_types, type_synth=recipe.grasp_type_synth,
+                                       callback=moved)
         except Exception as exc:  # noqa: BLE001 - the batch's objects fail, the other tasks go on
             for t in targets:
                 fails.append(failure(t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "

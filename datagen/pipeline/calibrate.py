@@ -118,8 +118,10 @@ class Bench:
         t0 = time.perf_counter()
         task = self.recipe.load_task()
         cfg = dataclasses.replace(self.recipe.synth, seed=self.seed, **dict(settings))
+        types = {t: {k: v for k, v in o.items() if k not in settings}  # the candidate's settings win
+                 for t, o in self.recipe.grasp_type_synth.items()}
         _, table = synthesize_rows(self.hand, self.targets, task, cfg, self.grasps,
-                                   grasp_types=self.recipe.grasp_types)
+                                   grasp_types=self.recipe.grasp_types, type_synth=types)
         fails: list = []
         tables = evaluate_rows(table, self.targets, task.name, self.recipe.eval, base=self.base, failures=fails)
         if fails:

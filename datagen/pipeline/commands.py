@@ -125,7 +125,8 @@ def _synth(args) -> int:
                   end="", file=sys.stderr, flush=True)
 
     results, table = synthesize_rows(hand, targets, recipe.load_task(), cfg, args.num,
-                                     grasp_types=recipe.grasp_types, callback=progress)
+                                     grasp_types=recipe.grasp_types, type_synth=recipe.grasp_type_synth,
+                                     callback=progress)
     usable = int(sum(r.usable(cfg.contact_threshold_m).sum() for r in results))
     if usable == 0:
         e = {k: float(torch.cat([r.energies[k] for r in results]).mean()) for k in results[0].energies}

@@ -8,6 +8,7 @@ layers, each a partial mapping of the recipe's parts (``synth``, ``eval``, ``pro
     library defaults   the config dataclasses' own (SynthConfig, EvalConfig, ProcessConfig)
     preset             PRESETS[name]: "dataset" (the default: what a job runs) or "paper"
     task               the task YAML's ``synth:`` block
+    grasp type         the ``synth:`` block of each grasp type of ``grasp_types`` (its grasps only)
     config             the user's config file or mapping
     flags              explicit command-line flags (or keyword arguments)
 
@@ -15,7 +16,9 @@ A key a layer lacks is unset, and the layer below decides; a key a layer sets wi
 it equals a default (``--seeds 1`` is one seed on every task). Nested mappings (``weights``,
 ``contact``) merge key by key. ``grasp_types`` (a `datagen.tasks.GraspMix`: which grasp type
 each force-closure grasp gets, by object size) may also be a grasp type's name (every grasp of
-that type: ``--grasp-type power``). ``scene`` (a `datagen.objects.tabletop.SceneConfig`: floating,
+that type: ``--grasp-type power``); the synthesis settings of a type's grasps are
+`Recipe.synth_for` (the grasp-type layer above: ``grasp_type_synth``, the fields in which they
+differ from ``synth``). ``scene`` (a `datagen.objects.tabletop.SceneConfig`: floating,
 or resting on a table in its stable poses) may also be the scene's name (``scene: tabletop``). The squeeze is computed for the evaluation's actuator stiffness of
 the hand (`squeeze_kp`: its protocol's gains), never set on its own. The result is a frozen `Recipe`: what a job records in job.json
 and hashes, and what ``datagen synth`` writes into its table's metadata.
@@ -23,6 +26,7 @@ and hashes, and what ``datagen synth`` writes into its table's metadata.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -35,7 +39,7 @@ from datagen.objects.tabletop import SCENES, SceneConfig
 from datagen.synth.config import SynthConfig
 from datagen.tasks.grasp_type import GraspMix
 
-__all__ = ["DEFAULT_PRESET", "PRESETS", "RECIPE_KEYS", "Recipe", "merge_layers", "resolve"]
+__all__ = ["DEFAULT_PRESET", "PRESETS", "RECIPE_KEYS", "Recipe", "for_grasp_type", "merge_layers", "resolve"]
 
 #: the parts of a configuration layer (a config file may hold other keys: a job's source, count, ...)
 RECIPE_KEYS = ("synth", "eval", "process", "grasp_types", "grid_resolution", "scene")
@@ -90,6 +94,10 @@ class Recipe(Config):
     #: where the object is: floating (gravity off, the six-direction test) or resting on a table
     #: in its stable poses (the lift test; docs/scenes.md)
     scene: SceneConfig = field(default_factory=SceneConfig)
+    #: grasp type (as ``grasp_types`` names it) -> the `SynthConfig` fields in which its grasps'
+    #: settings differ from ``synth``: its YAML's ``synth:`` block less what the config and the
+    #: flags set (`resolve`); a type not listed synthesizes with ``synth``
+    grasp_type_synth: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.preset not in PRESETS:
@@ -102,6 +110,53 @@ class Recipe(Config):
         from datagen.tasks import load_task
 
         return load_task(self.task)
+
+    def synth_for(self, grasp_type: str) -> SynthConfig:
+        """The `SynthConfig` of ``grasp_type``'s grasps (``grasp_type`` set, its layer applied)."""
+        return for_grasp_type(self.synth, grasp_type, self.grasp_type_synth)
+
+
+def for_grasp_type(cfg: SynthConfig, grasp_type: str, overrides: Mapping[str, Any] | None = None) -> SynthConfig:
+    """``cfg`` for the grasps of ``grasp_type``: that type named, with ``overrides[grasp_type]``
+    (a `Recipe.grasp_type_synth`: fields by type; None or a type not in it: none) over it."""
+    over = dict((overrides or {}).get(grasp_type) or {})
+    if not over:
+        return cfg if cfg.grasp_type == grasp_type else dataclasses.replace(cfg, grasp_type=grasp_type)
+    data = merge_layers(cfg.to_dict(), over, {"grasp_type": grasp_type})
+    return SynthConfig.from_dict(data, where=f"grasp type {grasp_type!r}: synth")
+
+
+def _differences(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys of ``b`` whose values differ from ``a``'s (nested mappings: their differing keys)."""
+    out: dict[str, Any] = {}
+    for k, v in b.items():
+        if isinstance(v, Mapping) and isinstance(a.get(k), Mapping):
+            sub = _differences(a[k], v)
+            if sub:
+                out[k] = sub
+        elif a.get(k) != v:
+            out[k] = v
+    return out
+
+
+def _grasp_type_layers(mix: GraspMix, below: list, above: list, synth: SynthConfig, extra: Mapping[str, Any],
+                       where: str) -> dict[str, Any]:
+    """`Recipe.grasp_type_synth`: for each type of ``mix`` with a ``synth:`` block, its layer
+    between the layers ``below`` (defaults to task) and ``above`` (config, flags), as the fields
+    that differ from ``synth`` (the recipe's without it); ``extra``: the fields set by the recipe."""
+    from datagen.tasks.grasp_type import load_grasp_type
+
+    out: dict[str, Any] = {}
+    for name in mix.types():
+        block = dict(load_grasp_type(name).synth)
+        if not block:
+            continue
+        layered = merge_layers(*below, {"synth": block}, *above).get("synth", {})
+        cfg = SynthConfig.from_dict({**layered, **extra, "grasp_type": name}, where=f"{where}: grasp type {name!r}: synth")
+        diff = _differences(synth.to_dict(), {k: v for k, v in cfg.to_dict().items() if k != "grasp_type"})
+        if diff:
+            out[name] = diff
+    return out
 
 
 def merge_layers(*layers: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -167,10 +222,11 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
     if name not in PRESETS:
         raise ConfigError(f"preset {name!r} is not known", f"choose from {sorted(PRESETS)}")
     spec = load_task(task)
-    merged = merge_layers(PRESETS[name], {"synth": dict(spec.synth)}, user, explicit)
+    below, above = [PRESETS[name], {"synth": dict(spec.synth)}], [user, explicit]
+    merged = merge_layers(*below, *above)
     ev = EvalConfig.from_dict(merged.get("eval"), where=f"{where}: eval")
-    synth = SynthConfig.from_dict({**merged.get("synth", {}), "task": spec.name, "squeeze_kp": squeeze_kp(hand, ev)},
-                                  where=f"{where}: synth (task {spec.name!r})")
+    extra = {"task": spec.name, "squeeze_kp": squeeze_kp(hand, ev)}
+    synth = SynthConfig.from_dict({**merged.get("synth", {}), **extra}, where=f"{where}: synth (task {spec.name!r})")
     process = ProcessConfig.from_dict(merged.get("process"), where=f"{where}: process")
     mix = GraspMix.from_dict(merged.get("grasp_types"), where=f"{where}: grasp_types")
     scene = SceneConfig.from_dict(merged.get("scene"), where=f"{where}: scene")
@@ -179,4 +235,4 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
                           "use scene tabletop with force-closure tasks (the six-direction test becomes the lift)")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
                   grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
-                  scene=scene)
+                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where))

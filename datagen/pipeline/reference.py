@@ -91,7 +91,7 @@ def render() -> str:
           "Every entry point (the library's `datagen.synthesize`, `datagen synth`, `datagen run`, the "
           "benchmarks) resolves one recipe per hand and task (`datagen.pipeline.resolve`) from these layers, "
           "later ones winning key by key: the library defaults below -> a preset -> the task YAML's `synth:` "
-          "block -> the user's config file (`--config`) -> explicit flags (`--preset`, `--iters`, `--seeds`, "
+          "block -> a grasp type's `synth:` block (for that type's grasps only) -> the user's config file (`--config`) -> explicit flags (`--preset`, `--iters`, `--seeds`, "
           "`--seed`, `--grasp-type`, `--scene`, `--stable-poses`). A key a layer does not set is left to the layer below, so a flag equal to a default "
           "still wins over a task.", "",
           "A config file is YAML with any of `preset`, `synth`, `eval`, `process`, `grasp_types`, `grid_resolution`, `scene` (a job's "

@@ -336,8 +336,9 @@ def _row_grasp_type(task: TaskSpec, grasp_type) -> str:
 def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: int, *,
                generator: torch.Generator | None = None, callback=None, threads: int | None = None) -> SynthesisResult:
     """Optimize ``num_per_object`` poses on each target; see the module docstring. ``cfg`` is the
-    resolved config of ``task`` (`datagen.pipeline.resolve(...).synth`; one lacking the task's
-    ``synth:`` block is refused). ``threads`` (default: torch's intra-op thread count): on the
+    resolved config of ``task`` and its grasp type (`datagen.pipeline.resolve(...).synth_for(type)`;
+    one lacking the task's ``synth:`` block is refused; the type's ``synth:`` block is a layer of
+    that resolution, not applied here). ``threads`` (default: torch's intra-op thread count): on the
     CPU, a large batch (the seeds' first iterations) runs in up to that many parts at once
     (`_run_split`; the poses do not depend on it)."""
     import time
@@ -345,7 +346,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
     t0 = time.perf_counter()
     cfg.check_task(task)
     gt = load_grasp_type(cfg.grasp_type)
-    cfg = gt.apply_synth(cfg).for_hand(hand)  # the type's own synthesis settings, then the hand's margin
+    cfg = cfg.for_hand(hand)  # the hand's sphere margin
     threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any
     b = _setup(hand, targets, task, cfg, num_per_object, generator or torch.Generator().manual_seed(cfg.seed), gt)

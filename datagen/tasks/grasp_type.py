@@ -9,8 +9,9 @@ links beyond the fingertips that take part in the grasp, by role, so one file se
   touching) or ``candidate`` (counted in the GWS while touching, not pulled);
 
 plus ``init`` (`datagen.tasks.InitConfig` fields over the task's: a palm distance, closing the
-fingers onto the object) and ``synth`` (`datagen.synth.SynthConfig` fields over the recipe's, a
-mapping such as ``weights`` merged key by key: an energy term, more starts for this type). ``precision`` is the fingertip grasp of the paper (no extra contacts);
+fingers onto the object) and ``synth`` (`datagen.synth.SynthConfig` fields for this type's grasps,
+a mapping such as ``weights`` merged key by key: an energy term, more starts; a layer of the recipe
+between the task and the user's config, `datagen.pipeline.recipe`). ``precision`` is the fingertip grasp of the paper (no extra contacts);
 ``power`` adds the palm and the phalanges.
 
 Which type a grasp gets is the recipe's ``grasp_types`` (a `GraspMix`: per object size, a share
@@ -48,7 +49,8 @@ class GraspType(Config):
     contacts: Mapping[str, str] = field(default_factory=dict)
     #: `InitConfig` fields replacing the task's (e.g. ``distance_m``, ``close``)
     init: Mapping[str, Any] = field(default_factory=dict)
-    #: `SynthConfig` fields over the recipe's (mappings merged key by key), e.g. ``weights``
+    #: `SynthConfig` fields of this type's grasps (mappings merged key by key), e.g. ``weights``:
+    #: over the task's, under the user's config and flags (`datagen.pipeline.Recipe.synth_for`)
     synth: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
@@ -69,8 +71,11 @@ class GraspType(Config):
             raise ConfigError(f"grasp type {self.name!r}: unknown init field(s) {unknown}",
                               f"known: {sorted(InitConfig.__dataclass_fields__)}")
         fixed = sorted(set(self.synth) & {"grasp_type", "task", "seed", "squeeze_kp"})
-        if fixed:  # (unknown fields and bad values: refused by apply_synth, naming the type)
+        if fixed:
             raise ConfigError(f"grasp type {self.name!r}: synth.{fixed[0]} is set by the job, not by a grasp type")
+        from datagen.synth.config import SynthConfig
+
+        SynthConfig.from_dict(dict(self.synth), f"grasp type {self.name!r}: synth")  # unknown fields, bad values
 
     def role(self, name: str) -> str | None:
         """``"pull"``, ``"candidate"`` or None (the role takes no part)."""
@@ -79,15 +84,6 @@ class GraspType(Config):
     @property
     def extra_contacts(self) -> bool:
         return bool(self.contacts)
-
-    def apply_synth(self, cfg):
-        """The recipe's `SynthConfig` with this type's ``synth`` fields over it."""
-        if not self.synth:
-            return cfg
-        data = cfg.to_dict()
-        for key, value in dict(self.synth).items():
-            data[key] = {**data[key], **dict(value)} if isinstance(value, Mapping) and isinstance(data.get(key), dict) else value
-        return type(cfg).from_dict(data, f"grasp type {self.name!r}: synth")
 
     def apply_init(self, init):
         """The task's `InitConfig` with this type's fields over it."""

@@ -41,18 +41,54 @@ def test_grasp_type_yaml_file_and_unknown_name(tmp_path):
         load_grasp_type("pwr")
 
 
-def test_grasp_type_synth_settings_go_over_the_recipes():
-    from datagen.synth.config import EnergyWeights, SynthConfig
+def test_grasp_type_synth_is_a_layer_between_the_task_and_the_users_config(tmp_path):
+    """A type's ``synth:`` block goes over the preset and the task (mappings key by key) for its
+    grasps only; the user's config and flags win over it, even with a default's value; the
+    precision type (no block) synthesizes with the recipe's own settings."""
+    from datagen.pipeline import resolve
 
-    t = GraspType.from_dict({"name": "hold", "synth": {"weights": {"penetration": 1e6}, "sphere_margin_m": 0.0}})
-    base = SynthConfig(iters=300, seeds_per_grasp=16, sphere_margin_m=0.0015, weights=EnergyWeights(distance=5e3))
-    cfg = t.apply_synth(base)
-    assert cfg.weights.penetration == 1e6 and cfg.weights.distance == 5e3  # merged key by key
-    assert cfg.sphere_margin_m == 0.0 and cfg.seeds_per_grasp == 16 and cfg.iters == 300
-    assert load_grasp_type("precision").apply_synth(base) is base
+    p = tmp_path / "hold.yaml"
+    p.write_text("name: hold\nsynth: {weights: {penetration: 1000000.0}, sphere_margin_m: 0.0, iters: 50}\n")
+    mix = {"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1.0}}, {"mix": {str(p): 1.0}}]}
+    r = resolve("shadow", config={"grasp_types": mix, "synth": {"weights": {"distance": 5e3}}})
+    cfg = r.synth_for(str(p))
+    assert (cfg.weights.penetration, cfg.weights.distance) == (1e6, 5e3)  # merged key by key
+    assert (cfg.sphere_margin_m, cfg.iters, cfg.seeds_per_grasp, cfg.grasp_type) == (0.0, 50, 16, str(p))
+    assert r.synth_for("precision") == r.synth  # no block: the recipe's settings
+    user = resolve("shadow", config={"grasp_types": mix, "synth": {"iters": 300}},  # the preset's value, set
+                   flags={"synth": {"weights": {"penetration": 2.0}}}).synth_for(str(p))
+    assert (user.iters, user.weights.penetration, user.sphere_margin_m) == (300, 2.0, 0.0)
     for bad, match in (({"iterz": 10}, "iterz"), ({"weights": {"penetration": -1}}, "penetration")):
         with pytest.raises(ConfigError, match=match):
-            GraspType.from_dict({"name": "x", "synth": bad}).apply_synth(base)
+            GraspType.from_dict({"name": "x", "synth": bad})
+
+
+def test_a_types_synth_block_reaches_its_grasps_and_the_users_config_wins(monkeypatch):
+    """Through the job's path (`synthesize_rows` with the recipe's layers): the power grasps of a
+    0.10 m object get the type's pieces and margin scale, unless the user's config sets one."""
+    from types import SimpleNamespace
+
+    from datagen.pipeline import batch, resolve
+    from datagen.tasks import load_task
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def fake(hand, group, task, c, n, **kw):
+        seen.append(c)
+        raise Stop
+
+    monkeypatch.setattr("datagen.synth.synthesize", fake)
+    target = SimpleNamespace(scale=0.10, support_plane=None)
+    for config, want in (({}, (True, 0.75)), ({"synth": {"penetration_pieces": False}}, (False, 0.75)),
+                         ({"synth": {"sphere_margin_scale": 1.0}}, (True, 1.0))):
+        r = resolve("shadow", config=config)  # the dataset preset: power grasps at 0.09-0.13 m
+        with pytest.raises(Stop):
+            batch.synthesize_rows(None, [target], load_task("force_closure"), r.synth, 1,
+                                  grasp_types=r.grasp_types, type_synth=r.grasp_type_synth)
+        assert (seen[-1].grasp_type, seen[-1].penetration_pieces, seen[-1].sphere_margin_scale) == ("power", *want)
 
 
 def test_mix_counts_by_size_and_share():
@@ -108,10 +144,10 @@ def test_a_types_margin_scale_takes_part_of_each_hands_margin():
 
     from datagen.synth.config import SynthConfig
 
-    t = GraspType.from_dict({"name": "shallow", "synth": {"sphere_margin_scale": 0.5}})
     shadow, allegro = SimpleNamespace(sphere_margin_m=0.0015), SimpleNamespace(sphere_margin_m=0.0005)
-    assert t.apply_synth(SynthConfig()).for_hand(shadow).sphere_margin_m == pytest.approx(0.00075, abs=1e-12)
-    assert t.apply_synth(SynthConfig()).for_hand(allegro).sphere_margin_m == pytest.approx(0.00025, abs=1e-12)
-    assert t.apply_synth(SynthConfig(sphere_margin_m=0.001)).for_hand(shadow).sphere_margin_m == 0.001
+    half = SynthConfig(sphere_margin_scale=0.5)
+    assert half.for_hand(shadow).sphere_margin_m == pytest.approx(0.00075, abs=1e-12)
+    assert half.for_hand(allegro).sphere_margin_m == pytest.approx(0.00025, abs=1e-12)
+    assert SynthConfig(sphere_margin_scale=0.5, sphere_margin_m=0.001).for_hand(shadow).sphere_margin_m == 0.001
     with pytest.raises(ConfigError, match="sphere_margin_scale"):
         SynthConfig(sphere_margin_scale=1.5)
