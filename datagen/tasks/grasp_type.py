@@ -99,14 +99,23 @@ class GraspBand(Config):
 
     max_scale_m: float | None = None  #: objects of at most this scale (m); None: every larger one
     mix: Mapping[str, float] = field(default_factory=lambda: {"precision": 1.0})  #: type name -> share of the grasps
+    #: the mix of these objects resting on a table (null: mix); one lying flat takes grasp_types.flat's
+    tabletop: Mapping[str, float] | None = None
 
     def __post_init__(self):
         if self.max_scale_m is not None and not (math.isfinite(self.max_scale_m) and self.max_scale_m > 0):
             raise ConfigError(f"grasp_types: max_scale_m must be a positive number of metres or null, got {self.max_scale_m}")
-        shares = dict(self.mix)
-        if not shares or any(not (math.isfinite(v) and v >= 0) for v in shares.values()) \
-                or abs(sum(shares.values()) - 1.0) > 1e-6:
-            raise ConfigError(f"grasp_types: mix must map grasp types to shares >= 0 summing to 1, got {shares}")
+        for name, mix in (("mix", self.mix), ("tabletop", self.tabletop)):
+            if mix is None:
+                continue
+            shares = dict(mix)
+            if not shares or any(not (math.isfinite(v) and v >= 0) for v in shares.values()) \
+                    or abs(sum(shares.values()) - 1.0) > 1e-6:
+                raise ConfigError(f"grasp_types: {name} must map grasp types to shares >= 0 summing to 1, got {shares}")
+
+    def mix_for(self, tabletop: bool) -> Mapping[str, float]:
+        """The shares of this band's objects, floating or resting on a table."""
+        return self.tabletop if tabletop and self.tabletop is not None else self.mix
 
 
 @dataclass(frozen=True)
@@ -127,9 +136,9 @@ class FlatBand(Config):
 class GraspMix(Config):
     """Which grasp types a force-closure task's grasps get, by object size (the recipe's
     ``grasp_types``): the first band whose ``max_scale_m`` holds the object's scale applies, and
-    its ``mix`` splits each object's grasps between types (largest remainder, in the mix's order);
-    with ``flat``, an object resting on a table no higher than its ``max_height_m`` gets its mix
-    instead, at any scale."""
+    its ``mix`` splits each object's grasps between types (largest remainder, in the mix's order),
+    its ``tabletop`` mix where the object rests on a table; with ``flat``, an object resting on a
+    table no higher than its ``max_height_m`` gets its mix instead, at any scale."""
 
     bands: tuple[GraspBand, ...] = (GraspBand(),)  #: by increasing max_scale_m, the last one open (null)
     #: tabletop objects lying flat (their top at most max_height_m above the table) get this mix instead of the bands' (null: the bands for every object)
@@ -141,8 +150,8 @@ class GraspMix(Config):
         sizes = [b.max_scale_m for b in self.bands[:-1]]
         if any(s is None for s in sizes) or sizes != sorted(sizes) or len(set(sizes)) != len(sizes):
             raise ConfigError(f"grasp_types.bands: max_scale_m must increase, got {sizes}")
-        for b in (*self.bands, *([self.flat] if self.flat is not None else [])):
-            for name in b.mix:
+        for mix in self._mixes():
+            for name in mix:
                 load_grasp_type(name)  # an unknown type is refused here, naming it
 
     @classmethod
@@ -150,21 +159,27 @@ class GraspMix(Config):
         """Every grasp of one type."""
         return cls(bands=(GraspBand(mix={name: 1.0}),))
 
+    def _mixes(self) -> list[Mapping[str, float]]:
+        """Every mix of the bands (floating, tabletop, flat), in that order."""
+        out = [b.mix for b in self.bands] + [b.tabletop for b in self.bands if b.tabletop is not None]
+        return out + ([self.flat.mix] if self.flat is not None else [])
+
     def types(self) -> list[str]:
         """Every grasp type the bands use (share > 0), in order of first use."""
         out: list[str] = []
-        for b in (*self.bands, *([self.flat] if self.flat is not None else [])):
-            out += [k for k, v in b.mix.items() if v > 0 and k not in out]
+        for mix in self._mixes():
+            out += [k for k, v in mix.items() if v > 0 and k not in out]
         return out
 
     def counts(self, scale: float, n: int, height_m: float | None = None) -> dict[str, int]:
         """Grasps of each type (share > 0) for ``n`` grasps on an object of ``scale`` m, resting
         on a table with its top ``height_m`` above it (None: floating)."""
         if self.flat is not None and height_m is not None and height_m <= self.flat.max_height_m + 1e-9:
-            band = self.flat
+            shares = self.flat.mix
         else:
             band = next(b for b in self.bands if b.max_scale_m is None or scale <= b.max_scale_m + 1e-9)
-        mix = [(k, v) for k, v in band.mix.items() if v > 0]
+            shares = band.mix_for(height_m is not None)
+        mix = [(k, v) for k, v in shares.items() if v > 0]
         raw = [v * n for _, v in mix]
         out = [int(math.floor(x)) for x in raw]
         order = sorted(range(len(mix)), key=lambda i: (-(raw[i] - out[i]), i))

@@ -154,7 +154,10 @@ def test_grasp_types_resolve_like_a_layer_and_a_name_means_every_grasp():
     flagged = resolve("shadow", "force_closure", config={"grasp_types": bands}, flags={"grasp_types": "precision"})
     assert flagged.grasp_types == GraspMix.single("precision")
     dataset = resolve("shadow", "force_closure").grasp_types
-    assert dataset.counts(0.06, 2, 0.03) == {"edge_pinch": 2} and dataset.counts(0.06, 2, 0.05) == {"precision": 2}
+    assert dataset.counts(0.06, 2, 0.03) == {"edge_pinch": 2} and dataset.counts(0.06, 2) == {"precision": 2}
+    # on a table, not lying flat: the small band's tabletop mix; the power band has none
+    assert dataset.counts(0.06, 2, 0.05) == {"edge_pinch": 2} and dataset.counts(0.12, 2, 0.08) == {"power": 2}
+    assert r.grasp_types.counts(0.06, 2, 0.05) == {"precision": 2}  # the user's bands have no tabletop mix
     assert r.grasp_types.counts(0.06, 2, 0.03) == {"edge_pinch": 2}  # the user's bands keep the preset's flat band
     assert flagged.grasp_types.counts(0.06, 2, 0.03) == {"precision": 2}  # a name: every grasp of that type
     assert resolve("shadow", "force_closure").grasp_types == GraspMix.from_dict(PRESETS["dataset"].get("grasp_types"))

@@ -154,7 +154,8 @@ def test_edge_pinch_starts_straddle_a_flat_box_from_above(shadow, box_targets):
 
 def test_a_flat_object_on_the_table_gets_the_flat_band_and_floating_the_bands(box_targets):
     """The job's choice per target (`datagen.pipeline.batch`): the 2 cm high box on the table is
-    flat (the dataset preset's edge pinch), the same box floating or a 4 cm limit's taller one not."""
+    flat (the dataset preset's edge pinch), the same box floating not; under a lower flat limit it
+    takes its size band's tabletop mix (the preset's: the edge pinch too), without one the band's mix."""
     from datagen.pipeline.batch import _grasp_groups
     from datagen.pipeline.recipe import resolve
 
@@ -165,4 +166,6 @@ def test_a_flat_object_on_the_table_gets_the_flat_band_and_floating_the_bands(bo
     assert [(name, count, [t.scene for t in ts]) for name, count, ts in groups] == [
         ("precision", 2, ["floating"]), ("edge_pinch", 2, ["tabletop"])]
     low = type(mix).from_dict({**mix.to_dict(), "flat": {"max_height_m": 0.019, "mix": {"edge_pinch": 1}}})
-    assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, low, "precision")] == ["precision"]
+    assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, low, "precision")] == ["edge_pinch"]
+    bare = type(mix).from_dict({**low.to_dict(), "bands": [{"mix": {"precision": 1}}]})
+    assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, bare, "precision")] == ["precision"]

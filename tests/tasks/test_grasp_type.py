@@ -116,6 +116,22 @@ def test_flat_band_takes_objects_lying_flat_on_a_table_at_any_scale():
     assert GraspMix().counts(0.06, 2, 0.01) == {"precision": 2}  # no flat band: the bands for every object
 
 
+def test_a_bands_tabletop_mix_takes_its_objects_resting_on_a_table():
+    mix = GraspMix.from_dict({"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1}, "tabletop": {"edge_pinch": 1}},
+                                        {"mix": {"power": 1}}],
+                              "flat": {"max_height_m": 0.04, "mix": {"precision": 1}}})
+    assert mix.counts(0.06, 2) == {"precision": 2}  # floating: the band's mix
+    assert mix.counts(0.06, 2, 0.05) == {"edge_pinch": 2}  # on a table: its tabletop mix
+    assert mix.counts(0.06, 2, 0.03) == {"precision": 2}  # lying flat: the flat band's, before the tabletop mix
+    assert mix.counts(0.12, 2, 0.08) == {"power": 2}  # a band without one: its mix on a table too
+    assert mix.types() == ["precision", "power", "edge_pinch"]
+    assert GraspMix.from_dict(mix.to_dict()) == mix
+    with pytest.raises(ConfigError, match="tabletop must map grasp types to shares"):
+        GraspMix.from_dict({"bands": [{"mix": {"precision": 1}, "tabletop": {"edge_pinch": 0.5}}]})
+    with pytest.raises(ConfigError, match="unknown grasp type 'claw'"):
+        GraspMix.from_dict({"bands": [{"mix": {"precision": 1}, "tabletop": {"claw": 1}}]})
+
+
 @pytest.mark.parametrize("flat, match", [
     ({"max_height_m": 0, "mix": {"edge_pinch": 1}}, "max_height_m must be a positive"),
     ({"mix": {"edge_pinch": 0.5}}, "summing to 1"),
