@@ -302,3 +302,51 @@ def test_thumb_axis_is_across_the_fingers_when_the_thumb_sits_at_the_wrist(tmp_p
     assert abs(float(t @ fingers)) < 1e-4 * np.linalg.norm(fingers)
     assert abs(float(t @ a)) < 1e-4
     assert float(t @ (pad("th") - origin)) > 0.01 and float(t @ base) > 0.01  # towards the thumb
+
+
+THUMB_IN_PALM_PLANE = """
+  <link name="th_prox">
+    <inertial><mass value="0.02"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.02 0 0" rpy="0 1.5708 0"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision>
+  </link>
+  <link name="th_tip">
+    <inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><mesh filename="meshes/tip.stl"/></geometry></collision>
+  </link>
+  <joint name="th_yaw" type="revolute">
+    <parent link="palm"/><child link="th_prox"/><origin xyz="0.05 0 0"/><axis xyz="0 0 -1"/>
+    <limit lower="0" upper="1.2" effort="1" velocity="1"/>
+  </joint>
+  <joint name="th_flex" type="revolute">
+    <parent link="th_prox"/><child link="th_tip"/><origin xyz="0.04 0 0" rpy="0 1.5708 0"/><axis xyz="0 1 0"/>
+    <limit lower="0" upper="1.0" effort="1" velocity="1"/>
+  </joint>
+"""
+
+
+def test_a_thumb_lying_in_the_palm_plane_starts_half_way_out_of_it(tmp_path):
+    """A thumb pointing sideways in the palm's plane, its yaw at a limit (as the Inspire's at zero):
+    the open pose swings it to mid-range, out of the palm's face (MuJoCo's kinematics: its pad
+    moves along the approach axis); the fingers and the in-plane flexion stay at zero."""
+    urdf = write_toy_urdf(tmp_path)
+    urdf.write_text(urdf.read_text().replace("</robot>", THUMB_IN_PALM_PLANE + "</robot>"))
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(urdf), "--name", "toy", "--root-body", "palm", "--finger", "a_tip=index",
+                           "--finger", "b_tip=ring", "--finger", "th_tip=th", "--thumb", "th", "--out", str(out)]) == 0
+    spec = load_spec(out)
+    assert spec.open_pose == pytest.approx({"a_j0": 0.0, "a_j1": 0.0, "b_j0": 0.0, "b_j1": 0.0, "th_yaw": 0.6,
+                                            "th_flex": 0.0})
+    hand = load_hand(out, dtype=torch.float64)
+    model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+    data = mujoco.MjData(model)
+
+    def thumb_height(q: dict) -> float:  # the thumb pad's height over the palm origin along the approach
+        data.qpos[:] = hand.joints_to_qpos(torch.tensor([q[n] for n in hand.joint_names], dtype=torch.float64))
+        mujoco.mj_kinematics(model, data)
+        palm, tip = model.body(spec.palm.link).id, model.body(spec.fingertips["th"].link).id
+        R = data.xmat[palm].reshape(3, 3)
+        pad = data.xpos[tip] + data.xmat[tip].reshape(3, 3) @ np.asarray(spec.fingertips["th"].point)
+        return float((pad - data.xpos[palm] - R @ np.asarray(spec.palm.origin)) @ (R @ np.asarray(spec.palm.approach)))
+
+    zeros = {n: 0.0 for n in spec.open_pose}
+    assert thumb_height(spec.open_pose) - thumb_height(zeros) > 0.02  # in front of the palm, not behind it
