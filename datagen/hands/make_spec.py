@@ -57,53 +57,6 @@ def _open_pose(model: mujoco.MjModel, couplings) -> np.ndarray:
     return q
 
 
-def _pad_points(model, data, q: np.ndarray, fingertips: dict) -> dict:
-    """World fingertip pad points at joint values ``q`` (model joint order)."""
-    data.qpos[model.jnt_qposadr] = q
-    mujoco.mj_kinematics(model, data)
-    return {k: data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(t.point)
-            for k, t in fingertips.items() for b in [model.body(t.link).id]}
-
-
-def _thumb_out_of_palm(model, data, q_open: np.ndarray, couplings, approach_world: np.ndarray,
-                       fingertips: dict, thumb: str, step: float = 1e-3) -> np.ndarray:
-    """The open pose with the thumb started out of the palm's plane: each joint that sits at a limit
-    in the open pose and, moved off it, moves the thumb's pad alone and mostly along the palm's
-    approach axis (out of the palm's face; finite differences through MuJoCo's kinematics) starts
-    at the middle of its range (couplings applied). Zeros leave the Inspire's and the Allegro's thumbs
-    (and the Shadows') in the palm's plane against a limit, and the synthesis, starting there, seldom
-    brought them round in front of the palm (benchmarks/results/hands.md)."""
-    lo = np.where(model.jnt_limited, model.jnt_range[:, 0], -np.inf)
-    hi = np.where(model.jnt_limited, model.jnt_range[:, 1], np.inf)
-    followers = {model.joint(c.joint).id for c in couplings}
-
-    def coupled(q):
-        q = q.copy()
-        for c in couplings:
-            j, lead = model.joint(c.joint).id, model.joint(c.leader).id
-            q[j] = np.clip(c.ratio * q[lead] + c.offset, lo[j], hi[j])
-        return q
-
-    base = _pad_points(model, data, q_open, fingertips)
-    out = q_open.copy()
-    for j in range(model.njnt):
-        at_limit = min(abs(q_open[j] - lo[j]), abs(q_open[j] - hi[j])) < 1e-9
-        if j in followers or not model.jnt_limited[j] or not at_limit:
-            continue
-        q = q_open.copy()
-        q[j] += step if q_open[j] - lo[j] < 1e-9 else -step
-        moved = {k: (v - base[k]) / step for k, v in _pad_points(model, data, coupled(q), fingertips).items()}
-        speed = {k: float(np.linalg.norm(v)) for k, v in moved.items()}
-        if speed[thumb] <= 1e-3 or any(v > 1e-3 for k, v in speed.items() if k != thumb):
-            continue  # moves no thumb, or another finger too (a palm joint, the wrist)
-        if float(moved[thumb] @ approach_world) >= 0.5 * speed[thumb]:  # away from the limit: out of the palm's face
-            out[j] = 0.5 * (lo[j] + hi[j])
-    out = coupled(out)
-    data.qpos[model.jnt_qposadr] = out
-    mujoco.mj_kinematics(model, data)
-    return out
-
-
 def _fingertip_links(model: mujoco.MjModel, with_geometry: set[int]) -> list[int]:
     """Leaf bodies, each replaced by its nearest ancestor that has collision geometry."""
     children = {b: [] for b in range(model.nbody)}
@@ -302,7 +255,6 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     height = np.percentile((pp - centre) @ approach, 98) if len(pp) > 1 else 0.0
     origin = centre + height * approach
     thumb_axis = _thumb_axis(model, data, palm, origin, approach, fingertips, thumb)
-    q_open = _thumb_out_of_palm(model, data, q_open, couplings, Rp @ approach, fingertips, thumb)
 
     pairs = _self_collision_pairs(model, data, q_open, spheres, np.random.default_rng([fit.seed, 11]))
 
