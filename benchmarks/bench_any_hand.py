@@ -50,12 +50,12 @@ HANDS: dict[str, tuple[str, str, int, str]] = {
 GATE = {5: 70.0, 4: 60.0, 3: 60.0}  # success % each hand must reach (issue 43); penetration p90 <= 1 mm
 
 
-def commands(name: str, spec: Path, job: Path, grasps: int) -> tuple[list[str], list[str], list[str]]:
+def commands(name: str, spec: Path, job: Path, grasps: int, cpus: int = 1) -> tuple[list[str], list[str], list[str]]:
     pkg, src, _, _ = HANDS[name]
     init = ["datagen", "hand", "init", src, "--package", pkg, "--out", str(spec), "--name", name]
     calibrate = ["datagen", "hand", "calibrate", str(spec)]
     run = ["datagen", "run", "--hand", str(spec), "--manifest", str(MANIFEST.relative_to(ROOT)), "--objects", "14",
-           "--tasks", "force_closure", "--grasps", str(grasps), "--out", str(job), "--no-progress"]
+           "--tasks", "force_closure", "--grasps", str(grasps), "--num-cpus", str(cpus), "--out", str(job), "--no-progress"]
     return init, calibrate, run
 
 
@@ -80,6 +80,7 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_any_hand", help="specs, jobs, timings")
     ap.add_argument("--reuse", action="store_true", help="tabulate the jobs already under --work (timings.json)")
     ap.add_argument("--no-calibrate", action="store_true", help="run the job on the spec as `hand init` wrote it")
+    ap.add_argument("--num-cpus", type=int, default=1, help="the job's Ray CPUs (1: one job beside others' work)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
@@ -88,7 +89,7 @@ def main() -> None:
     rows, shown = [], {}
     for name in args.hands.split(","):
         spec, job = args.work / "specs" / f"{name}.yaml", args.work / "jobs" / f"{name}-g{args.grasps}"
-        init, calibrate, run = commands(name, spec, job, args.grasps)
+        init, calibrate, run = commands(name, spec, job, args.grasps, args.num_cpus)
         steps = [init, run] if args.no_calibrate else [init, calibrate, run]
         if not args.reuse:
             timings[name] = {"init_s": _timed(init), "calibrate_s": 0.0 if args.no_calibrate else _timed(calibrate),

@@ -109,6 +109,32 @@ def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, n
     return pts[best], normal, R @ pad
 
 
+def _thumb_axis(model, data, palm: int, origin: np.ndarray, approach: np.ndarray, fingertips: dict,
+                thumb: str) -> np.ndarray:
+    """Unit thumb axis of the palm frame (palm link frame): across the palm, perpendicular to the
+    approach and to the fingers' direction (palm origin to the other fingertips' pads), on the
+    side of the thumb's base (its fingertip's pad where the base lies on the fingers' line).
+
+    The direction to the thumb's base alone is not enough: a thumb mounted near the wrist (the
+    Schunk SVH's) puts its base behind the palm origin, and that axis ran along the fingers."""
+    Rp, tp = data.xmat[palm].reshape(3, 3), data.xpos[palm]
+
+    def in_palm(body: int, point=np.zeros(3)) -> np.ndarray:  # a body-frame point, palm frame, from the origin
+        v = Rp.T @ (data.xpos[body] + data.xmat[body].reshape(3, 3) @ point - tp) - origin
+        return v - (v @ approach) * approach  # projected onto the palm's plane
+
+    chain = _ancestors(model, model.body(fingertips[thumb].link).id)
+    side = in_palm(chain[chain.index(palm) - 1])  # the first body below the palm on the thumb's chain
+    tip = in_palm(model.body(fingertips[thumb].link).id, np.asarray(fingertips[thumb].point))
+    others = [in_palm(model.body(t.link).id, np.asarray(t.point)) for k, t in fingertips.items() if k != thumb]
+    along = np.mean(others, axis=0) if others else np.zeros(3)
+    if np.linalg.norm(along) > 1e-6:
+        along /= np.linalg.norm(along)
+        side, tip = side - (side @ along) * along, tip - (tip @ along) * along
+    axis = side if np.linalg.norm(side) >= max(0.1 * np.linalg.norm(tip), 1e-9) else tip
+    return axis / np.linalg.norm(axis)
+
+
 def _self_collision_pairs(model, data, q_open, spheres, rng, samples: int = 400,
                           reach: float = 0.01) -> list[SelfCollisionPair]:
     """Link pairs worth checking for self-collision, with the spheres that take part.
@@ -228,11 +254,7 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     centre = pp.mean(axis=0)
     height = np.percentile((pp - centre) @ approach, 98) if len(pp) > 1 else 0.0
     origin = centre + height * approach
-    chain = _ancestors(model, model.body(fingertips[thumb].link).id)
-    thumb_base = chain[chain.index(palm) - 1]  # first body below the palm on the thumb's chain
-    to_thumb = Rp.T @ (data.xpos[thumb_base] - tp) - origin
-    thumb_axis = to_thumb - (to_thumb @ approach) * approach
-    thumb_axis /= np.linalg.norm(thumb_axis)
+    thumb_axis = _thumb_axis(model, data, palm, origin, approach, fingertips, thumb)
 
     pairs = _self_collision_pairs(model, data, q_open, spheres, np.random.default_rng([fit.seed, 11]))
 

@@ -248,3 +248,57 @@ def test_urdf_links_overlapping_at_rest_are_excluded_from_collision(tmp_path):
     assert data.ncon == 0
     shadow = load_spec(builtin_spec_path("shadow"))
     assert flatten_hand(resolve_asset(shadow.mjcf, shadow.source_file), shadow.root_body, write=False).model.nexclude == 0
+
+
+THUMB_AT_WRIST = """
+  <link name="th_prox">
+    <inertial><mass value="0.02"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.02"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision>
+  </link>
+  <link name="th_tip">
+    <inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><mesh filename="meshes/tip.stl"/></geometry></collision>
+  </link>
+  <joint name="th_j0" type="revolute">
+    <parent link="palm"/><child link="th_prox"/><origin xyz="0.05 0 -0.035"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="th_j1" type="revolute">
+    <parent link="th_prox"/><child link="th_tip"/><origin xyz="0 0 0.04"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
+  </joint>
+"""
+
+
+def test_thumb_axis_is_across_the_fingers_when_the_thumb_sits_at_the_wrist(tmp_path):
+    """A thumb mounted near the wrist (as the Schunk SVH's): the direction to its base runs 35 deg
+    along the fingers; the palm's thumb axis is across them (perpendicular to the line from the palm
+    origin to the other fingertips, as MuJoCo's kinematics places them), on the thumb's side."""
+    urdf = write_toy_urdf(tmp_path)
+    urdf.write_text(urdf.read_text().replace("</robot>", THUMB_AT_WRIST + "</robot>"))
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(urdf), "--name", "toy", "--root-body", "palm", "--finger", "a_tip=index",
+                           "--finger", "b_tip=ring", "--finger", "th_tip=th", "--thumb", "th", "--out", str(out)]) == 0
+    spec = load_spec(out)
+    hand = load_hand(out, dtype=torch.float64)
+    model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+    data = mujoco.MjData(model)
+    data.qpos[:] = hand.joints_to_qpos(hand.open_pose)
+    mujoco.mj_kinematics(model, data)
+    palm = model.body(spec.palm.link).id
+    R, x = data.xmat[palm].reshape(3, 3), data.xpos[palm]
+    origin = x + R @ np.asarray(spec.palm.origin)
+    a, t = R @ np.asarray(spec.palm.approach), R @ np.asarray(spec.palm.thumb)
+
+    def pad(name):  # the fingertip pad point in the world, from MuJoCo's link pose
+        tip = spec.fingertips[name]
+        b = model.body(tip.link).id
+        return data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(tip.point)
+
+    fingers = 0.5 * (pad("index") + pad("ring")) - origin
+    fingers -= (fingers @ a) * a
+    base = data.xpos[model.body("th_prox").id] - origin
+    assert abs(float(fingers @ base)) / (np.linalg.norm(fingers) * np.linalg.norm(base)) > 0.4  # the old axis' error
+    assert abs(float(t @ fingers)) < 1e-4 * np.linalg.norm(fingers)
+    assert abs(float(t @ a)) < 1e-4
+    assert float(t @ (pad("th") - origin)) > 0.01 and float(t @ base) > 0.01  # towards the thumb
