@@ -304,8 +304,6 @@ def _draw_wrap(hand, targets, object_index, init_cfg, rand, tip_index):
         ratio = (widths[2] / widths[1].clamp_min(1e-9)) ** 2
         u = _unit(torch.cos(phi)[:, None] * e3 + (ratio * torch.sin(phi))[:, None] * e2)
         n = _unit(torch.linalg.cross(e1.expand(m, 3), u))
-        if init_cfg.wrap == "around":  # the palm on the thin side's face, the fingers across the section
-            u, n = n, u
         line = centre + (WRAP_SLIDE * 0.5 * widths[0] * (2 * rand(m) - 1))[:, None] * e1
         rel = pts[None] - line[:, None]  # (m, H, 3)
         near = (rel - (rel * e1).sum(-1, keepdim=True) * e1 - (rel * n[:, None]).sum(-1, keepdim=True) * n[:, None])
@@ -324,7 +322,7 @@ def _draw_wrap(hand, targets, object_index, init_cfg, rand, tip_index):
     thumb = thumb - (thumb * approach).sum(-1, keepdim=True) * approach
     thumb = _rotate_about(_unit(thumb) * sign, approach, math.radians(init_cfg.roll_deg) * (2 * rand(B) - 1))
     joints = (curled_joints(hand, init_cfg.curl) if init_cfg.curl > 0 else hand.open_pose).expand(B, -1).clone()
-    pinch = _pinch_vector(hand, joints[0], tip_index) if init_cfg.wrap == "across" else None
-    if pinch is None:  # the palm's thumb axis along the long axis, the fingers across the section
+    pinch = _pinch_vector(hand, joints[0], tip_index)
+    if pinch is None:  # no thumb: the palm's thumb axis along the long axis, the fingers across the section
         thumb = _unit(torch.linalg.cross(approach, thumb))
     return root_from_palm(hand, origin, approach, thumb, pinch), joints

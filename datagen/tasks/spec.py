@@ -47,13 +47,10 @@ class InitConfig(Config):
     target_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: "approach": the point the palm (or the fingertips, see aim) aims at, m
     curl: float = 0.0  #: fingers start this fraction (0..1) of the way from open to flexed (a hook)
     aim: str = "palm"  #: "approach": what lands on target_m, "palm" (palm origin) or "fingertips" (task tips' centre)
-    wrap: str = "across"  #: "wrap": "across" (the thumb-to-fingers pinch axis across the thin side) or "around" (the palm's thumb axis along the long axis, the fingers curling round the thin side)
 
     def __post_init__(self):
         if self.kind not in ("surround", "above", "approach", "rim", "wrap"):
             raise ConfigError(f"init.kind must be 'surround', 'above', 'approach', 'rim' or 'wrap', got {self.kind!r}")
-        if self.wrap not in ("across", "around"):
-            raise ConfigError(f"init.wrap must be 'across' or 'around', got {self.wrap!r}")
         if self.aim not in ("palm", "fingertips"):
             raise ConfigError(f"init.aim must be 'palm' or 'fingertips', got {self.aim!r}")
         if not (isinstance(self.curl, (int, float)) and 0.0 <= self.curl <= 1.0):
