@@ -61,7 +61,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     # At 0.15 m power grasps held less (Shadow 11% -> 0%); the fingertip grasps at 0.06-0.08 m
     # are unchanged. The power type starts pre-curled and keeps out of the convex pieces (issue
     # 41's third round): Shadow 58% / 36% -> 78% / 36%, held out 55% / 45% -> 70% / 55%, E3M5
-    # 42% / 33% -> 67% / 50%, successes' penetration p90 <= 0.6 mm (benchmarks/results/sizes.md).
+    # 42% / 33% -> 67% / 50%, successes' penetration p90 <= 0.6 mm (benchmarks/results/sizes.md);
+    # its starts face the object across its longest axis (fourth round, `init.kind: wrap`): E3M5
+    # 54% / 46% -> 83% / 71%, Shadow 78% / 39% -> 69% / 53%, LEAP 92% / 75% -> 83% / 67%.
     # An object lying flat on a table (its top at most 4 cm above it) gets edge pinches (issue 45):
     # Shadow on the flat development objects 40% -> 70% lifted (benchmarks/results/tabletop.md).
     # So does every other object up to 0.09 m on a table (the claw from above, its tabletop mix):

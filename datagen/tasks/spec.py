@@ -37,7 +37,7 @@ SPEC_DIR = Path(__file__).parent / "specs"
 class InitConfig(Config):
     """Initial hand poses (see :mod:`datagen.synth.init`). Vectors are in the object frame."""
 
-    kind: str = "surround"  #: "surround" (palm faces the object from its hull), "above", "approach" or "rim" (a pinch across the object's footprint from above)
+    kind: str = "surround"  #: "surround" (palm faces the object from its hull), "above", "approach", "rim" (a pinch across the object's footprint from above) or "wrap" (palm across the object's longest axis, the pinch axis round its thin side)
     distance_m: tuple[float, float] = (0.03, 0.06)  #: palm distance from the convex hull, uniform range
     roll_deg: float = 180.0  #: jitter about the approach axis, +-
     tilt_deg: float = 15.0  #: jitter of the approach axis, +-
@@ -49,8 +49,8 @@ class InitConfig(Config):
     aim: str = "palm"  #: "approach": what lands on target_m, "palm" (palm origin) or "fingertips" (task tips' centre)
 
     def __post_init__(self):
-        if self.kind not in ("surround", "above", "approach", "rim"):
-            raise ConfigError(f"init.kind must be 'surround', 'above', 'approach' or 'rim', got {self.kind!r}")
+        if self.kind not in ("surround", "above", "approach", "rim", "wrap"):
+            raise ConfigError(f"init.kind must be 'surround', 'above', 'approach', 'rim' or 'wrap', got {self.kind!r}")
         if self.aim not in ("palm", "fingertips"):
             raise ConfigError(f"init.aim must be 'palm' or 'fingertips', got {self.aim!r}")
         if not (isinstance(self.curl, (int, float)) and 0.0 <= self.curl <= 1.0):

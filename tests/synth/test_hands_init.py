@@ -24,6 +24,7 @@ def box():
 @pytest.mark.parametrize("init", [
     {"kind": "surround"},
     {"kind": "approach", "approach": [0, 0, -1], "thumb": [1, 0, 0], "roll_deg": 10},
+    {"kind": "wrap", "curl": 0.3, "roll_deg": 20},
 ])
 @pytest.mark.slow
 def test_initial_poses_face_the_object_without_touching_it(name, init, box):
@@ -136,3 +137,40 @@ def test_aim_must_be_palm_or_fingertips():
 
     with pytest.raises(ConfigError, match="init.aim"):
         TaskSpec.from_dict({"name": "t", "init": {"kind": "approach", "aim": "tips"}})
+
+
+def test_wrap_puts_the_pinch_across_a_box_thinnest_side():
+    """``wrap`` on a 20 x 10 x 5 cm box turned by a known rotation (hand-computed axes: R's
+    columns): without jitter every palm faces the box across its 20 cm length and every pinch
+    axis (thumb tip minus the other tips, by the hand's own kinematics) lies across it too;
+    with the section's widths 10 : 5 cm the pinch axis is drawn near the 5 cm side (median angle
+    atan(0.25) = 14 deg from it), and the palm starts distance_m outside the box's face."""
+    hand = load_hand("shadow")
+    R = torch.tensor(trimesh.transformations.random_rotation_matrix(np.random.default_rng(3).random(3))[:3, :3],
+                     dtype=torch.float32)
+    ext = np.array([0.2, 0.1, 0.05])
+    mesh = trimesh.creation.box(extents=ext / np.linalg.norm(ext / 2))
+    T = np.eye(4)
+    T[:3, :3] = R.double().numpy()
+    mesh.apply_transform(T)
+    box = GraspTarget.from_mesh(mesh, float(np.linalg.norm(ext / 2)), "box", grid_resolution=16)
+    init = TaskSpec.from_dict({"name": "t", "init": {"kind": "wrap", "curl": 0.3, "roll_deg": 0, "tilt_deg": 0,
+                                                     "offset_m": 0.0}}).init
+    B = 256
+    root, joints = initial_poses(hand, [box], torch.zeros(B, dtype=torch.long), init, torch.Generator().manual_seed(0))
+    long_, thin = R[:, 0], R[:, 2]
+    tips = hand.fingertip_points(root, joints)  # (B, 5, 3), the thumb first
+    pinch = torch.nn.functional.normalize(tips[:, 0] - tips[:, 1:].mean(1), dim=-1)
+    palm = hand.palm_frame(root, joints)
+    # across the length, to the axes' estimate from 2048 hull samples (within 2 deg)
+    assert torch.all((pinch @ long_).abs() < 0.035)
+    assert torch.all((palm.approach @ long_).abs() < 0.035)
+    angle = torch.rad2deg(torch.acos((pinch @ thin).abs().clamp(max=1)))
+    assert 8 < float(angle.median()) < 20, float(angle.median())
+    n = torch.nn.functional.normalize(palm.origin - (palm.origin @ long_)[:, None] * long_, dim=-1)
+    face = 0.5 * (torch.tensor(ext, dtype=torch.float32) * (n @ R).abs()).sum(-1)  # the box's support along n
+    out = (palm.origin * n).sum(-1) - face
+    assert torch.all(out > init.distance_m[0] - 0.01) and torch.all(out < init.distance_m[1] + 0.003)
+    assert torch.all((palm.approach * n).sum(-1) < -0.95)  # facing the box
+    slide = palm.origin @ long_
+    assert float(slide.abs().max()) <= 0.25 * 0.1 + 0.002 and float(slide.std()) > 0.01

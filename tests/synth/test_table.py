@@ -169,3 +169,26 @@ def test_a_flat_object_on_the_table_gets_the_flat_band_and_floating_the_bands(bo
     assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, low, "precision")] == ["edge_pinch"]
     bare = type(mix).from_dict({**low.to_dict(), "bands": [{"mix": {"precision": 1}}]})
     assert [name for name, _, _ in _grasp_groups(task, [on_table], 2, bare, "precision")] == ["precision"]
+
+
+def test_wrap_starts_on_the_table_are_the_tasks_surround_starts(shadow, box_targets):
+    """The power type's ``wrap`` start (from the side of the object) on a table is the task's
+    ``surround`` start with its random roll, draw for draw, so tabletop power grasps start as
+    before; floating ones do not."""
+    import dataclasses
+
+    from datagen.tasks import load_grasp_type
+
+    floating, on_table = box_targets
+    task = load_task("force_closure")
+    init = load_grasp_type("power").apply_init(task.init)
+    assert init.kind == "wrap" and init.roll_deg != task.init.roll_deg
+    surround = dataclasses.replace(init, kind="surround", roll_deg=task.init.roll_deg)
+    sc = Scenery.for_task(task, [on_table], CPU, torch.float32, sphere_margin_m=0.0)
+    idx = torch.zeros(16, dtype=torch.long)
+    starts = [initial_poses(shadow, [on_table], idx, c, torch.Generator().manual_seed(0), scenery=sc) for c in (init, surround)]
+    assert all(torch.equal(a, b) for a, b in zip(*starts))
+    palm = shadow.palm_frame(*starts[0])
+    assert torch.all(plane_distance(palm.origin.double(), torch.tensor(on_table.support_plane).double()) > 0)
+    free = [initial_poses(shadow, [floating], idx, c, torch.Generator().manual_seed(0)) for c in (init, surround)]
+    assert not torch.equal(free[0][0], free[1][0])
