@@ -14,8 +14,8 @@ exact ways of skipping most of them:
   that overlaps is still in the list. A pose whose spheres moved further gets a new list. The
   optimizer moves fingers by up to ~4 mm per iteration at first and by well under 0.5 mm after
   ~50 iterations, so most iterations reuse the list. A pose that moves fast (its list would not
-  outlive a few calls) gets a list of only the pairs that overlap now, for this call, ~2.5x
-  cheaper to make than one within ``skin_m``.
+  outlive a few calls) gets a list of only the pairs that overlap now, for this call, at about
+  half the cost of one within ``skin_m`` (LEAP: 0.61 against 1.17 s on recorded calls).
 
 Either way the overlapping pairs are summed in the same order, (pose, cluster pair, pair), so the
 energy is bit-identical to the all-pairs sum computed in that order.
@@ -181,6 +181,15 @@ def _block_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.
     return b[order], g[order]
 
 
+def _dense_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.Tensor]:
+    """`_block_groups`' ``(b, g)`` from every block's whole distance matrix, reordered into groups
+    (one ``nonzero`` per call: on a GPU, one wait for the device instead of one per block)."""
+    B = centre.shape[0]
+    gap = torch.cat([torch.cdist(centre[:, a0:a1], centre[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist")
+                     .reshape(B, -1) for a0, a1, b0, b1 in t["blocks"]], 1).index_select(1, t["perm"]) - t["reach"]
+    return (gap < margin).nonzero(as_tuple=True)
+
+
 def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: float | torch.Tensor = 0.0):
     """``(rows (n,), pair (n,))``: for each pose of ``centres (B, S, 3)`` (m), the self-collision
     sphere pairs (indices into ``hand.self_collision_pairs``) whose gap is below ``margin_m`` (m: a
@@ -196,8 +205,10 @@ def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: 
         if t["gather"]:  # few groups (Shadow: 199 in 88 link pairs): each group's two centres read directly
             gap = (centre.index_select(1, t["group_a"]) - centre.index_select(1, t["group_b"])).norm(dim=-1) - t["reach"]
             b, g = (gap < (margin_m[:, None] if per_pose else margin_m)).nonzero(as_tuple=True)
-        else:  # many (LEAP: 20,665): whole link-pair distance matrices, 3x faster than reading the pairs
+        elif centre.device.type == "cpu":  # many (LEAP: 20,665): link-pair blocks of distance matrices, culled
             b, g = _block_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
+        else:  # the same blocks whole, without one device sync per block (`_block_groups`' nonzero)
+            b, g = _dense_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
         n = t["sizes"][g]
         rows = torch.repeat_interleave(b, n)
         # each candidate's place in the (group, pair) order; its spheres read from there directly
@@ -254,8 +265,8 @@ def _merge_by_pose(a: tuple[torch.Tensor, torch.Tensor], b: tuple[torch.Tensor, 
 FRESH_MARGIN_M = 1e-6
 #: a pose whose spheres moved more than ``skin_m / SLOW_FRACTION`` per call since its list was made
 #: gets a list for one call at `FRESH_MARGIN_M` instead of one within ``skin_m``: a ``skin_m`` list
-#: would go stale within ~``SLOW_FRACTION / 2`` calls, and it costs ~2.5x a fresh one to make (LEAP:
-#: 3.5 M candidate pairs for 512 poses at 4 mm, ~1.4 M at 0)
+#: would go stale within ~``SLOW_FRACTION / 2`` calls, and it costs ~2x a fresh one to make (LEAP,
+#: recorded calls of 34-512 poses: 1.17 s at 4 mm, 0.61 s at 1 um; benchmarks/results/pipeline.md)
 SLOW_FRACTION = 6.0
 
 
