@@ -125,12 +125,13 @@ bench-pipeline: $(STAMP)
 	$(PY) -m benchmarks.bench_pipeline --default-job 2 --grasps-sweep 4,8,16,32 --cold 40 --ceiling 4
 
 # The default job on real meshes (issue 47): this code beside BASELINE (a checkout's root, e.g.
-# `git worktree add ../base main`), Shadow and LEAP, alternating runs -> pipeline.md's first section
+# `git worktree add ../base main`), the four built-in hands, alternating runs -> pipeline.md's first section
 .PHONY: bench-pipeline-real
 REAL_OBJECTS ?= 6
+REAL_HANDS ?= leap,shadow_e3m5,allegro,shadow
 BASELINE ?=
 bench-pipeline-real: $(STAMP) hands real-objects
-	$(PY) -m benchmarks.bench_pipeline --real $(REAL_OBJECTS) --hands shadow,leap $(if $(BASELINE),--baseline $(BASELINE))
+	$(PY) -m benchmarks.bench_pipeline --real $(REAL_OBJECTS) --hands $(REAL_HANDS) $(if $(BASELINE),--baseline $(BASELINE))
 
 # Task-oriented benchmark (issue 8): paper Table II + hyper-parameter rows -> benchmarks/results/tasks.md.
 # Resumable (records in .cache/bench_tasks); e.g. BENCH_TASKS_ARGS="--tasks turn_knob2 --variants full --num 20"

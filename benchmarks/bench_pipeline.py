@@ -291,7 +291,7 @@ def main(argv=None) -> int:
                     "once without Ray (0: skip it)")
     ap.add_argument("--real", type=int, default=0, help="only the default job on the first N objects of "
                     "manifests/real_dev.jsonl, per hand of --hands, beside --baseline (benchmarks/pipeline_real.py)")
-    ap.add_argument("--hands", default="shadow,leap", help="hands of --real (comma-separated)")
+    ap.add_argument("--hands", default="leap,shadow_e3m5,allegro,shadow", help="hands of --real (comma-separated)")
     ap.add_argument("--baseline", default=None, help="root of another checkout (e.g. a git worktree of main) "
                     "run beside this one by --real")
     ap.add_argument("--real-runs", type=int, default=3, help="runs per code and hand of --real")

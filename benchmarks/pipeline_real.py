@@ -55,7 +55,8 @@ def _run(code: Path, hand: str, count: int, out: Path, cache: str) -> dict:
 
 
 def _warm(count: int, cache: str) -> None:
-    """The manifest's first ``count`` objects processed and their SDF grids built before timing."""
+    """The manifest's first ``count`` objects processed, their SDF grids and their convex pieces'
+    grids (the power grasps' penetration terms) built before timing."""
     from datagen.objects.manifest import load_manifest
     from datagen.objects.process import process_object
     from datagen.synth.target import GraspTarget
@@ -65,7 +66,7 @@ def _warm(count: int, cache: str) -> None:
     for e in load_manifest(ROOT / MANIFEST)[:count]:
         p = process_object(e.ref(), rec.process, root=cache or None, expected_sha256=e.sha256)
         if p.ok:
-            GraspTarget.from_processed(p, 0.08, grid_resolution=rec.grid_resolution, cache=cache or None)
+            GraspTarget.from_processed(p, 0.08, grid_resolution=rec.grid_resolution, cache=cache or None).pieces()
 
 
 def compare(hands: list[str], count: int, baseline: Path | None, runs: int, cache: str, tmp: Path,

@@ -40,7 +40,8 @@ from .grid_sdf import GridSDF
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GRID_VERSION", "grid_key", "grid_path", "load_grid", "load_or_build", "load_or_build_mesh_sdf"]
+__all__ = ["GRID_VERSION", "grid_key", "grid_path", "load_grid", "load_or_build", "load_or_build_keyed",
+           "load_or_build_mesh_sdf"]
 
 GRID_VERSION = 1  #: bump when GridSDF.from_mesh computes different values for the same inputs
 
@@ -129,6 +130,24 @@ def load_or_build(vertices, faces, *, resolution: int = 64, margin: float = 0.25
     grid = GridSDF.from_mesh(vertices, faces, resolution=resolution, margin=margin, samples=samples, seed=seed,
                              dtype=dtype, exact=exact() if callable(exact) else exact)
     log.info("SDF grid %s built in %.2f s (resolution %d)", key[:12], time.perf_counter() - t0, resolution)
+    _store(path, key, grid)
+    return grid, True
+
+
+def load_or_build_keyed(key: str, resolution: int, dtype: torch.dtype, build, root: str | Path | None = None,
+                        what: str = "grid") -> tuple[GridSDF, bool]:
+    """A grid whose ``key`` the caller derived from everything that determines its values (and
+    ``GRID_VERSION``), from the cache under ``root`` or ``build()`` (a `GridSDF` of ``dtype`` and
+    resolution ``resolution``) and stored there, in this module's layout and checks. Returns
+    ``(grid, built)``."""
+    path = grid_path(root, key)
+    grid = load_grid(path, key, resolution, dtype)
+    if grid is not None:
+        log.debug("%s %s loaded from %s", what, key[:12], path)
+        return grid, False
+    t0 = time.perf_counter()
+    grid = build()
+    log.info("%s %s built in %.2f s (resolution %d)", what, key[:12], time.perf_counter() - t0, resolution)
     _store(path, key, grid)
     return grid, True
 

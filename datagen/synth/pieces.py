@@ -17,6 +17,8 @@ the pieces' surfaces (their union's distance, to the sample spacing).
 
 from __future__ import annotations
 
+import hashlib
+import json
 import threading
 from collections import OrderedDict
 
@@ -26,6 +28,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from datagen._interrupt import sigint_deferred
+from datagen.objects import grid_cache
 from datagen.objects.grid_sdf import GridSDF
 
 __all__ = ["piece_planes", "pieces_grid"]
@@ -59,22 +62,45 @@ def _signed_distance(hulls: list[trimesh.Trimesh], nodes: np.ndarray, samples: i
     return np.where(depth > 0, -depth, dist)
 
 
-def pieces_grid(paths, like: GridSDF, samples: int = 200_000, seed: int = 0) -> GridSDF:
+def _disk_key(paths, lo: np.ndarray, hi: np.ndarray, R: int, samples: int, seed: int, dtype: torch.dtype) -> str:
+    """sha256 hex of the pieces' files (their bytes, in order) and the grid's box and parameters."""
+    h = hashlib.sha256()
+    for p in paths:
+        with open(p, "rb") as fh:  # the processed object's own pieces (the objects cache), not a user's path
+            h.update(hashlib.sha256(fh.read()).digest())
+    params = {"kind": "pieces", "version": grid_cache.GRID_VERSION, "lo": lo.tolist(), "hi": hi.tolist(),
+              "resolution": int(R), "samples": int(samples), "seed": int(seed), "dtype": str(dtype)}
+    h.update(json.dumps(params, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def pieces_grid(paths, like: GridSDF, samples: int = 200_000, seed: int = 0, root=None) -> GridSDF:
     """The pieces' (OBJ files, normalized units) signed distance on ``like``'s box and resolution,
-    in its dtype; kept for the last few objects (a job synthesizes an object at every scale)."""
+    in its dtype; kept for the last few objects (a job synthesizes an object at every scale) and,
+    with ``root`` (an objects cache root), in that cache's grids (`datagen.objects.grid_cache`: the
+    same values, 1.3-5.6 s CPU per object saved on a warm cache)."""
     R = like.values.shape[0]
     lo, hi = like.lo.detach().cpu().double().numpy(), like.hi.detach().cpu().double().numpy()
-    key = (tuple(str(p) for p in paths), tuple(lo.round(9)), tuple(hi.round(9)), R, samples, seed)
+    key = (tuple(str(p) for p in paths), tuple(lo.round(9)), tuple(hi.round(9)), R, samples, seed, root)
     with _LOCK:
         hit = _GRIDS.get(key)
         if hit is not None:
             _GRIDS.move_to_end(key)
             return hit
-    hulls = [trimesh.convex.convex_hull(trimesh.load(p, force="mesh", process=False).vertices) for p in paths]
-    axes = [np.linspace(lo[i], hi[i], R) for i in range(3)]
-    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    values = torch.as_tensor(_signed_distance(hulls, nodes, samples, seed).reshape(R, R, R), dtype=like.values.dtype)
-    grid = GridSDF(values.to(like.values.device), like.lo.clone(), like.hi.clone())
+
+    def build() -> GridSDF:
+        hulls = [trimesh.convex.convex_hull(trimesh.load(p, force="mesh", process=False).vertices) for p in paths]
+        axes = [np.linspace(lo[i], hi[i], R) for i in range(3)]
+        nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        values = torch.as_tensor(_signed_distance(hulls, nodes, samples, seed).reshape(R, R, R), dtype=like.values.dtype)
+        return GridSDF(values, like.lo.detach().cpu().clone(), like.hi.detach().cpu().clone())
+
+    if root is None:
+        built = build()
+    else:
+        disk_key = _disk_key(paths, lo, hi, R, samples, seed, like.values.dtype)
+        built, _ = grid_cache.load_or_build_keyed(disk_key, R, like.values.dtype, build, root, what="pieces grid")
+    grid = GridSDF(built.values.to(like.values.device), like.lo.clone(), like.hi.clone())
     with _LOCK:
         _GRIDS[key] = grid
         while len(_GRIDS) > 4:

@@ -13,7 +13,9 @@ exact ways of skipping most of them:
   since: a pair's gap shrinks by at most the sum of its two spheres' displacements, so every pair
   that overlaps is still in the list. A pose whose spheres moved further gets a new list. The
   optimizer moves fingers by up to ~4 mm per iteration at first and by well under 0.5 mm after
-  ~50 iterations, so most iterations reuse the list.
+  ~50 iterations, so most iterations reuse the list. A pose that moves fast (its list would not
+  outlive a few calls) gets a list of only the pairs that overlap now, for this call, at about
+  half the cost of one within ``skin_m`` (LEAP: 0.61 against 1.17 s on recorded calls).
 
 Either way the overlapping pairs are summed in the same order, (pose, cluster pair, pair), so the
 energy is bit-identical to the all-pairs sum computed in that order.
@@ -111,27 +113,102 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
            "gather": uniq.numel() <= GATHER_GROUPS_PER_BLOCK * len(blocks),
            "sizes": sizes, "starts": torch.cumsum(sizes, 0) - sizes, "order": order, "rank": rank,
            "end_a": pairs[order, 0], "end_b": pairs[order, 1]}  # each pair's spheres, in (group, pair) order
+    if not out["gather"]:
+        out.update(_block_tables(blocks, owner.to(dev), mean, radius, count, perm.to(dev), out["reach"]))
     hand._self_pair_bounds = out
     return out
 
 
-def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: float = 0.0):
+def _block_tables(blocks, owner, mean, radius, count, perm, reach) -> dict:
+    """The link-pair blocks' own tables for `_block_groups`: each cluster's link ``cluster_link
+    (C,)`` and weight ``cluster_weight (C,)`` (its share of its link's spheres); each link's
+    bounding sphere radius ``link_radius (K,)`` about the mean of its spheres (m, enclosing its
+    clusters' bounding spheres); each block's two links ``block_a``, ``block_b (N,)``; and per
+    block the group of each of its cells ``cell_group`` (list of ``(cells,)``, -1: no group) and
+    the cell's bounding radii's sum ``cell_reach`` (-inf where no group: never a candidate)."""
+    K = int(owner.max()) + 1
+    n_link = torch.zeros(K, dtype=count.dtype, device=count.device).index_add_(0, owner, count)
+    weight = (count / n_link[owner]).to(mean.dtype)  # the link mean is the clusters' weighted mean
+    link_mean = index_add(torch.zeros(K, 3, dtype=mean.dtype, device=mean.device), 0, owner, mean * weight[:, None])
+    link_radius = torch.zeros(K, dtype=mean.dtype, device=mean.device).scatter_reduce_(
+        0, owner, (mean - link_mean[owner]).norm(dim=-1) + radius, "amax")
+    total = sum((a1 - a0) * (b1 - b0) for a0, a1, b0, b1 in blocks)
+    flat_group = torch.full((total,), -1, dtype=torch.long, device=perm.device)
+    flat_group[perm] = torch.arange(perm.numel(), device=perm.device)
+    flat_reach = torch.full((total,), -torch.inf, dtype=reach.dtype, device=reach.device)
+    flat_reach[perm] = reach
+    sizes = [(a1 - a0) * (b1 - b0) for a0, a1, b0, b1 in blocks]
+    return {"cluster_link": owner, "cluster_weight": weight, "link_radius": link_radius,
+            "block_a": torch.tensor([int(owner[a0]) for a0, _, _, _ in blocks], device=owner.device),
+            "block_b": torch.tensor([int(owner[b0]) for _, _, b0, _ in blocks], device=owner.device),
+            "cell_group": list(flat_group.split(sizes)), "cell_reach": list(flat_reach.split(sizes))}
+
+
+#: taken off a link pair's bounding-sphere gap (m) before it culls the pair's block: rounding of
+#: the link means in float32 is ~1e-8 m
+_LINK_TOLERANCE_M = 1e-6
+
+
+def _block_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(b, g)``: the (pose, group) pairs whose clusters' bounding spheres come within ``margin``
+    (m, a number or ``(B, 1)``) for cluster centres ``centre (B, C, 3)``, in (pose, group) order.
+    Per link-pair block, only the poses where the two links' bounding spheres come that close
+    (about 45% of LEAP's in a synthesis) compute the block's cluster distances; the gaps compared
+    are those of the whole-block distance matrices."""
+    B = centre.shape[0]
+    link = torch.zeros(B, t["link_radius"].shape[0], 3, dtype=centre.dtype, device=centre.device)
+    link = index_add(link, 1, t["cluster_link"], centre * t["cluster_weight"][:, None])
+    ra, rb = t["link_radius"][t["block_a"]], t["link_radius"][t["block_b"]]
+    lgap = (link.index_select(1, t["block_a"]) - link.index_select(1, t["block_b"])).norm(dim=-1) - ra - rb
+    meet = (lgap - _LINK_TOLERANCE_M < margin).T.contiguous()  # (blocks, B)
+    per_pose = torch.is_tensor(margin) and margin.dim() > 0
+    bs, gs = [], []
+    for k, (a0, a1, b0, b1) in enumerate(t["blocks"]):
+        poses = meet[k].nonzero().squeeze(-1)
+        if poses.numel() == 0:
+            continue
+        sub = centre.index_select(0, poses) if poses.numel() < B else centre
+        d = torch.cdist(sub[:, a0:a1], sub[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist").reshape(poses.numel(), -1)
+        m = margin.index_select(0, poses) if per_pose else margin
+        bb, cell = (d - t["cell_reach"][k] < m).nonzero(as_tuple=True)
+        bs.append(poses[bb])
+        gs.append(t["cell_group"][k][cell])
+    if not bs:
+        empty = torch.zeros(0, dtype=torch.long, device=centre.device)
+        return empty, empty
+    b, g = torch.cat(bs), torch.cat(gs)
+    order = torch.argsort(b * t["reach"].shape[0] + g)  # keys are distinct
+    return b[order], g[order]
+
+
+def _dense_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.Tensor]:
+    """`_block_groups`' ``(b, g)`` from every block's whole distance matrix, reordered into groups
+    (one ``nonzero`` per call: on a GPU, one wait for the device instead of one per block)."""
+    B = centre.shape[0]
+    gap = torch.cat([torch.cdist(centre[:, a0:a1], centre[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist")
+                     .reshape(B, -1) for a0, a1, b0, b1 in t["blocks"]], 1).index_select(1, t["perm"]) - t["reach"]
+    return (gap < margin).nonzero(as_tuple=True)
+
+
+def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: float | torch.Tensor = 0.0):
     """``(rows (n,), pair (n,))``: for each pose of ``centres (B, S, 3)`` (m), the self-collision
-    sphere pairs (indices into ``hand.self_collision_pairs``) whose gap is below ``margin_m``
-    (0: the overlapping pairs), ordered by (pose, cluster pair, pair). No gradient."""
+    sphere pairs (indices into ``hand.self_collision_pairs``) whose gap is below ``margin_m`` (m: a
+    number, or one per pose ``(B,)``; 0: the overlapping pairs), ordered by (pose, cluster pair,
+    pair). No gradient."""
     t = _cluster_bounds(hand)
     B, S = centres.shape[:2]
     with torch.no_grad():
         centres = centres.detach()
+        per_pose = torch.is_tensor(margin_m)
         centre = torch.zeros(B, t["count"].shape[0], 3, dtype=centres.dtype, device=centres.device)
         centre = index_add(centre, 1, t["cluster"], centres) / t["count"][:, None].to(centres.dtype)
         if t["gather"]:  # few groups (Shadow: 199 in 88 link pairs): each group's two centres read directly
-            dist = (centre.index_select(1, t["group_a"]) - centre.index_select(1, t["group_b"])).norm(dim=-1)
-        else:  # many (LEAP: 20,665): whole link-pair distance matrices, 3x faster than reading the pairs
-            dist = torch.cat([torch.cdist(centre[:, a0:a1], centre[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist")
-                              .reshape(B, -1) for a0, a1, b0, b1 in t["blocks"]], 1).index_select(1, t["perm"])
-        gap = dist - t["reach"]  # (B, G) bounding spheres' gap of each group
-        b, g = (gap < margin_m).nonzero(as_tuple=True)  # (n,) poses and groups whose bounds meet
+            gap = (centre.index_select(1, t["group_a"]) - centre.index_select(1, t["group_b"])).norm(dim=-1) - t["reach"]
+            b, g = (gap < (margin_m[:, None] if per_pose else margin_m)).nonzero(as_tuple=True)
+        elif centre.device.type == "cpu":  # many (LEAP: 20,665): link-pair blocks of distance matrices, culled
+            b, g = _block_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
+        else:  # the same blocks whole, without one device sync per block (`_block_groups`' nonzero)
+            b, g = _dense_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
         n = t["sizes"][g]
         rows = torch.repeat_interleave(b, n)
         # each candidate's place in the (group, pair) order; its spheres read from there directly
@@ -140,7 +217,8 @@ def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: 
         i, j = t["end_a"][at], t["end_b"][at]
         flat, base = centres.reshape(-1, 3), rows * S
         d = (flat.index_select(0, base + i) - flat.index_select(0, base + j)).norm(dim=-1)
-        near = d < radii[i] + radii[j] + margin_m  # the narrow phase
+        reach = (radii.index_select(0, t["end_a"]) + radii.index_select(0, t["end_b"]))[at]  # radii[i] + radii[j]
+        near = d < reach + (margin_m[rows] if per_pose else margin_m)  # the narrow phase
         return rows[near], t["order"][at[near]]
 
 
@@ -182,17 +260,32 @@ def _merge_by_pose(a: tuple[torch.Tensor, torch.Tensor], b: tuple[torch.Tensor, 
     return rows, pair
 
 
+#: margin (m) of a list made for one call only: the pairs within it of overlapping (above float
+#: rounding, so no overlapping pair is left out); the energy keeps only those that overlap
+FRESH_MARGIN_M = 1e-6
+#: a pose whose spheres moved more than ``skin_m / SLOW_FRACTION`` per call since its list was made
+#: gets a list for one call at `FRESH_MARGIN_M` instead of one within ``skin_m``: a ``skin_m`` list
+#: would go stale within ~``SLOW_FRACTION / 2`` calls, and it costs ~2x a fresh one to make (LEAP,
+#: recorded calls of 34-512 poses: 1.17 s at 4 mm, 0.61 s at 1 um; benchmarks/results/pipeline.md)
+SLOW_FRACTION = 6.0
+
+
 class SelfPairList:
-    """Per-pose lists of the sphere pairs within ``skin_m`` (m) of overlapping, reused while the
-    pose's spheres stay within ``skin_m / 2`` of where they were when its list was made (measured
-    in a frame attached to the hand, so moving the whole hand costs nothing). One list serves one
-    batch of poses: a batch of another size starts afresh; keep one per optimizer run."""
+    """Per-pose lists of the sphere pairs within a margin of overlapping, reused while the pose's
+    spheres stay within half that margin of where they were when its list was made (measured in a
+    frame attached to the hand, so moving the whole hand costs nothing). The margin is ``skin_m``
+    (m) for a pose that moves slowly, and `FRESH_MARGIN_M` (a list for the call it is made in) for
+    one whose spheres moved more than ``skin_m / SLOW_FRACTION`` per call since its last list (every
+    pose at first: the optimizer's first iterations move fingers by up to ~4 mm). One list serves
+    one batch of poses: a batch of another size starts afresh; keep one per optimizer run."""
 
     def __init__(self, hand, skin_m: float = 0.004):
         if not skin_m > 0:
             raise ValueError(f"SelfPairList: skin_m must be > 0, got {skin_m}")
         self.hand, self.skin_m = hand, skin_m
         self.ref: torch.Tensor | None = None  # (B, S, 3) sphere centres in the hand frame at each list's making
+        self.margin: torch.Tensor | None = None  # (B,) m, the margin each pose's list was made with
+        self.age: torch.Tensor | None = None  # (B,) calls since each pose's list was made
         self.rows = self.pair = None
         self.rebuilt = 0  # poses whose list was (re)made, over all calls (for benchmarks)
 
@@ -202,19 +295,28 @@ class SelfPairList:
         with torch.no_grad():
             c = centres.detach()
             local = (c - frame[:, None, :3, 3]) @ frame[:, :3, :3]  # (B, S, 3) in the hand frame
+            B = local.shape[0]
             if self.ref is None or self.ref.shape != local.shape:
-                stale = torch.ones(local.shape[0], dtype=torch.bool, device=local.device)
+                stale = torch.ones(B, dtype=torch.bool, device=local.device)
+                moved = torch.full((B,), float("inf"), dtype=local.dtype, device=local.device)
                 self.ref = local.clone()
+                self.margin = torch.zeros(B, dtype=local.dtype, device=local.device)
+                self.age = torch.ones(B, dtype=local.dtype, device=local.device)
                 self.rows = torch.zeros(0, dtype=torch.long, device=local.device)
                 self.pair = torch.zeros(0, dtype=torch.long, device=local.device)
             else:
-                stale = 2 * (local - self.ref).norm(dim=-1).amax(-1) >= self.skin_m
+                moved = (local - self.ref).norm(dim=-1).amax(-1)  # (B,) farthest sphere's displacement
+                stale = 2 * moved >= self.margin
             redo = stale.nonzero().squeeze(-1)
             if redo.numel():
-                r_new, p_new = candidate_pairs(self.hand, c[redo], radii, self.skin_m)
+                slow = moved[redo] / self.age[redo] < self.skin_m / SLOW_FRACTION
+                margin = torch.where(slow, self.skin_m, FRESH_MARGIN_M).to(local.dtype)
+                r_new, p_new = candidate_pairs(self.hand, c[redo], radii, margin)
                 kept = ~stale[self.rows]
-                self.rows, self.pair = _merge_by_pose((self.rows[kept], self.pair[kept]), (redo[r_new], p_new),
-                                                      local.shape[0])
+                self.rows, self.pair = _merge_by_pose((self.rows[kept], self.pair[kept]), (redo[r_new], p_new), B)
                 self.ref[redo] = local[redo]
+                self.margin[redo] = margin
+                self.age[redo] = 0
                 self.rebuilt += int(redo.numel())
+            self.age += 1
             return self.rows, self.pair

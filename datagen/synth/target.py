@@ -11,6 +11,7 @@ import torch
 import trimesh
 
 from datagen.objects import grid_cache
+from datagen.objects.cache import cache_root
 from datagen.objects.grid_sdf import GridSDF
 from datagen.objects.sdf import MeshSDF, SDFResult
 
@@ -40,6 +41,7 @@ class GraspTarget:
     support_plane: tuple | None = None  #: tabletop: (4,) ``[n, d]``, height above the table ``n . x + d`` (m, object frame)
     table_pose: tuple | None = None  #: tabletop: (7,) the object's pose in the table frame ``[x y z qw qx qy qz]`` (m)
     piece_paths: tuple = ()  #: the convex pieces MuJoCo collides (OBJ, normalized units); () unknown
+    grid_root: str | None = None  #: the objects cache root its grids came from (the pieces' grid is kept there too); None: not cached
 
     @classmethod
     def from_mesh(cls, mesh: trimesh.Trimesh, scale: float, object_id: str, *, object_path: str = "",
@@ -68,7 +70,8 @@ class GraspTarget:
         return cls(object_id, float(scale), sdf,
                    torch.as_tensor(np.asarray(pts) * scale, dtype=torch.float32),
                    torch.as_tensor(hull.face_normals[faces], dtype=torch.float32),
-                   object_path=object_path, mesh_sha256=mesh_sha256, grid=grid)
+                   object_path=object_path, mesh_sha256=mesh_sha256, grid=grid,
+                   grid_root=str(cache_root(cache)) if cache_grid else None)
 
     @classmethod
     def from_processed(cls, processed, scale: float, *, cache_grid: bool = True, **kw) -> "GraspTarget":
@@ -92,7 +95,7 @@ class GraspTarget:
             return self
         from datagen.synth.pieces import pieces_grid
 
-        return replace(self, grid=pieces_grid(self.piece_paths, self.grid))
+        return replace(self, grid=pieces_grid(self.piece_paths, self.grid, root=self.grid_root))
 
     @functools.cached_property
     def centre_of_mass(self) -> np.ndarray:

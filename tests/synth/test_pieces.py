@@ -115,3 +115,27 @@ def test_penetration_pieces_keeps_the_hand_out_of_pieces_that_stick_out(tmp_path
         depth[on] = d.amax(-1)
     assert float(depth[False].median()) > 0.002  # the piece's 2.3 mm overhang: sunk into it
     assert bool((depth[True] < depth[False]).all()) and float(depth[True].max()) < 0.001
+
+
+def test_pieces_grid_from_the_objects_cache_is_the_built_one(tmp_path, monkeypatch):
+    """With an objects cache root the pieces' grid is stored there once and read back with the
+    same values (a second process, here a cleared memory cache, does not rebuild it); a changed
+    piece file is a different key."""
+    from datagen.synth import pieces as P
+
+    paths, _, like = _pieces(tmp_path)
+    fresh = pieces_grid(paths, like, samples=20_000)
+    P._GRIDS.clear()
+    first = pieces_grid(paths, like, samples=20_000, root=tmp_path / "cache")
+    stored = list((tmp_path / "cache" / "grids").rglob("*.npz"))
+    P._GRIDS.clear()
+    real = P._signed_distance
+    monkeypatch.setattr(P, "_signed_distance", lambda *a: pytest.fail("rebuilt although stored"))
+    again = pieces_grid(paths, like, samples=20_000, root=tmp_path / "cache")
+    assert len(stored) == 1 and torch.equal(first.values, fresh.values) and torch.equal(again.values, fresh.values)
+    assert torch.equal(again.lo, like.lo) and torch.equal(again.hi, like.hi)
+    monkeypatch.setattr(P, "_signed_distance", real)
+    trimesh.creation.box(extents=(0.7, 0.3, 0.3)).export(paths[0])
+    P._GRIDS.clear()
+    other = pieces_grid(paths, like, samples=20_000, root=tmp_path / "cache")
+    assert len(list((tmp_path / "cache" / "grids").rglob("*.npz"))) == 2 and not torch.equal(other.values, fresh.values)

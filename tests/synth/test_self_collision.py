@@ -122,3 +122,57 @@ def test_merged_pair_lists_are_in_pose_then_pair_order():
     order = torch.argsort(torch.cat([a[0], b[0]]) * 40 + torch.cat([a[1], b[1]]))
     assert torch.equal(rows, torch.cat([a[0], b[0]])[order]) and torch.equal(pair, torch.cat([a[1], b[1]])[order])
     assert a[0].numel() and b[0].numel()  # both lists had entries
+
+
+@pytest.mark.parametrize("name", ["shadow", "allegro", "leap"])
+def test_candidate_pairs_with_a_margin_per_pose_equal_the_brute_force_list(name):
+    """The broad phase (cluster bounds; for Allegro and LEAP also the link-pair culling of the
+    block distance matrices) against every pair's own gap: with a margin per pose (the pair
+    lists' 4 mm skin or the 1 um of a list for one call), exactly the pairs within it, in
+    (pose, cluster pair, pair) order."""
+    from datagen.synth.self_collision import _cluster_bounds, candidate_pairs
+
+    try:
+        hand = load_hand(name)
+    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+        pytest.skip(f"hand {name} not available: {exc}")
+    g = torch.Generator().manual_seed(3)
+    B = 8
+    frac = 0.5 + 0.5 * torch.rand(B, hand.num_joints, generator=g)  # flexed: some pairs overlap
+    joints = hand.apply_couplings(hand.joint_lower + frac * (hand.joint_upper - hand.joint_lower))
+    root = torch.tensor([0.02, 0.0, -0.01, 1.0, 0, 0, 0]).expand(B, 7)
+    c, r = hand.spheres(root, joints)
+    margin = torch.where(torch.arange(B) % 2 == 0, 0.004, 1e-6).to(c.dtype)
+    rows, pair = candidate_pairs(hand, c, r, margin)
+    i, j = hand.self_collision_pairs[:, 0], hand.self_collision_pairs[:, 1]
+    near = (c[:, i] - c[:, j]).norm(dim=-1) < r[i] + r[j] + margin[:, None]  # (B, P)
+    b, p = near.nonzero(as_tuple=True)
+    order = torch.argsort(b * i.numel() + _cluster_bounds(hand)["rank"][p])
+    assert torch.equal(rows, b[order]) and torch.equal(pair, p[order])
+    assert (rows % 2 == 0).any() and (rows % 2 == 1).any()  # both margins found pairs
+    odd = int(rows[rows % 2 == 1][0])
+    assert torch.equal(candidate_pairs(hand, c[odd:odd + 1], r, 1e-6)[1], pair[rows == odd])  # as a number
+
+
+@pytest.mark.parametrize("name", ["allegro", "leap"])
+def test_culled_blocks_find_the_groups_of_the_whole_blocks(name):
+    """The CPU's link-culled blocks (`_block_groups`) and the whole blocks other devices use
+    (`_dense_groups`): the same (pose, cluster pair) list, for a number and a margin per pose."""
+    from datagen.synth.self_collision import _block_groups, _cluster_bounds, _dense_groups
+    from datagen.scatter import index_add
+
+    try:
+        hand = load_hand(name)
+    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+        pytest.skip(f"hand {name} not available: {exc}")
+    g = torch.Generator().manual_seed(4)
+    B = 12
+    frac = torch.rand(B, hand.num_joints, generator=g)
+    joints = hand.apply_couplings(hand.joint_lower + frac * (hand.joint_upper - hand.joint_lower))
+    c, _ = hand.spheres(torch.tensor([0.0, 0.01, 0.0, 1.0, 0, 0, 0]).expand(B, 7), joints)
+    t = _cluster_bounds(hand)
+    centre = index_add(torch.zeros(B, t["count"].shape[0], 3), 1, t["cluster"], c) / t["count"][:, None].float()
+    for margin in (0.004, torch.where(torch.arange(B) % 3 == 0, 0.004, 1e-6)[:, None].float()):
+        culled, whole = _block_groups(t, centre, margin), _dense_groups(t, centre, margin)
+        assert whole[0].numel() > 0
+        assert torch.equal(culled[0], whole[0]) and torch.equal(culled[1], whole[1])
