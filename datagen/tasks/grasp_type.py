@@ -71,11 +71,8 @@ class GraspType(Config):
             raise ConfigError(f"grasp type {self.name!r}: unknown init field(s) {unknown}",
                               f"known: {sorted(InitConfig.__dataclass_fields__)}")
         fixed = sorted(set(self.synth) & {"grasp_type", "task", "seed", "squeeze_kp"})
-        if fixed:
+        if fixed:  # (unknown fields and bad values: refused by the recipe's resolution, naming the type)
             raise ConfigError(f"grasp type {self.name!r}: synth.{fixed[0]} is set by the job, not by a grasp type")
-        from datagen.synth.config import SynthConfig
-
-        SynthConfig.from_dict(dict(self.synth), f"grasp type {self.name!r}: synth")  # unknown fields, bad values
 
     def role(self, name: str) -> str | None:
         """``"pull"``, ``"candidate"`` or None (the role takes no part)."""

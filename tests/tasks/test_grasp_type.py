@@ -58,9 +58,11 @@ def test_grasp_type_synth_is_a_layer_between_the_task_and_the_users_config(tmp_p
     user = resolve("shadow", config={"grasp_types": mix, "synth": {"iters": 300}},  # the preset's value, set
                    flags={"synth": {"weights": {"penetration": 2.0}}}).synth_for(str(p))
     assert (user.iters, user.weights.penetration, user.sphere_margin_m) == (300, 2.0, 0.0)
-    for bad, match in (({"iterz": 10}, "iterz"), ({"weights": {"penetration": -1}}, "penetration")):
+    for k, (bad, match) in enumerate((("{iterz: 10}", "iterz"), ("{weights: {penetration: -1}}", "penetration"))):
+        q = tmp_path / f"bad{k}.yaml"
+        q.write_text(f"name: bad{k}\nsynth: {bad}\n")
         with pytest.raises(ConfigError, match=match):
-            GraspType.from_dict({"name": "x", "synth": bad})
+            resolve("shadow", config={"grasp_types": str(q)})
 
 
 def test_a_types_synth_block_reaches_its_grasps_and_the_users_config_wins(monkeypatch):
