@@ -38,7 +38,7 @@ FINGER = """
     <collision><geometry><mesh filename="{mesh}"/></geometry></collision>
   </link>
   <joint name="{n}_j0" type="revolute">
-    <parent link="palm"/><child link="{n}_prox"/><origin xyz="{x} 0 0.04"/><axis xyz="1 0 0"/>
+    <parent link="palm"/><child link="{n}_prox"/><origin xyz="{x} 0 {z}"/><axis xyz="1 0 0"/>
     <limit lower="0" upper="1.5" effort="1" velocity="1"/>
   </joint>
   <joint name="{n}_j1" type="revolute">
@@ -55,7 +55,7 @@ def write_toy_urdf(tmp: Path, mesh_name: str = "meshes/tip.stl", make_mesh: bool
         tip = trimesh.creation.capsule(height=0.02, radius=0.008)
         tip.apply_translation([0, 0, 0.018])
         tip.export(tmp / "meshes" / "tip.stl")
-    fingers = "".join(FINGER.format(n=n, x=x, mesh=mesh_name) for n, x in (("a", 0.025), ("b", -0.025)))
+    fingers = "".join(FINGER.format(n=n, x=x, z=0.04, mesh=mesh_name) for n, x in (("a", 0.025), ("b", -0.025)))
     path = tmp / "toy.urdf"
     path.write_text(URDF.format(fingers=fingers))
     return path
@@ -250,24 +250,7 @@ def test_urdf_links_overlapping_at_rest_are_excluded_from_collision(tmp_path):
     assert flatten_hand(resolve_asset(shadow.mjcf, shadow.source_file), shadow.root_body, write=False).model.nexclude == 0
 
 
-THUMB_AT_WRIST = """
-  <link name="th_prox">
-    <inertial><mass value="0.02"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
-    <collision><origin xyz="0 0 0.02"/><geometry><cylinder radius="0.008" length="0.04"/></geometry></collision>
-  </link>
-  <link name="th_tip">
-    <inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
-    <collision><geometry><mesh filename="meshes/tip.stl"/></geometry></collision>
-  </link>
-  <joint name="th_j0" type="revolute">
-    <parent link="palm"/><child link="th_prox"/><origin xyz="0.05 0 -0.035"/><axis xyz="1 0 0"/>
-    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
-  </joint>
-  <joint name="th_j1" type="revolute">
-    <parent link="th_prox"/><child link="th_tip"/><origin xyz="0 0 0.04"/><axis xyz="1 0 0"/>
-    <limit lower="0" upper="1.5" effort="1" velocity="1"/>
-  </joint>
-"""
+THUMB_AT_WRIST = FINGER.format(n="th", x=0.05, z=-0.035, mesh="meshes/tip.stl")  # a thumb at the wrist
 
 
 def test_thumb_axis_is_across_the_fingers_when_the_thumb_sits_at_the_wrist(tmp_path):

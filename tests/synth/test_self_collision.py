@@ -7,14 +7,19 @@ from datagen.hands import load_hand
 from datagen.synth.self_collision import self_overlap_energy
 
 
+def _hand(name: str):
+    """The hand, or the test skipped (Allegro and LEAP are optional: make hands)."""
+    try:
+        return load_hand(name)
+    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
+        pytest.skip(f"hand {name} not available: {exc}")
+
+
 @pytest.mark.parametrize("name", ["shadow", "allegro", "leap"])
 def test_self_overlap_energy_equals_the_all_pairs_sum(name):
     """Against the all-pairs sum of squared sphere overlaps (the oracle), value and gradient,
     on poses from open to strongly flexed (so that some poses do self-collide)."""
-    try:
-        hand = load_hand(name)
-    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
-        pytest.skip(f"hand {name} not available: {exc}")
+    hand = _hand(name)
     g = torch.Generator().manual_seed(0)
     frac = torch.rand(6, hand.num_joints, generator=g) * torch.linspace(0.0, 1.0, 6)[:, None]
     joints = hand.apply_couplings(hand.joint_lower + frac * (hand.joint_upper - hand.joint_lower))
@@ -40,10 +45,7 @@ def test_reused_pair_lists_equal_the_all_pairs_sum_along_a_walk(name):
     and equal the list-free energy bit for bit (same pairs, same order)."""
     from datagen.synth.self_collision import SelfPairList
 
-    try:
-        hand = load_hand(name)
-    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
-        pytest.skip(f"hand {name} not available: {exc}")
+    hand = _hand(name)
     g = torch.Generator().manual_seed(1)
     B = 6
     lo, hi = hand.joint_lower, hand.joint_upper
@@ -132,10 +134,7 @@ def test_candidate_pairs_with_a_margin_per_pose_equal_the_brute_force_list(name)
     (pose, cluster pair, pair) order."""
     from datagen.synth.self_collision import _cluster_bounds, candidate_pairs
 
-    try:
-        hand = load_hand(name)
-    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
-        pytest.skip(f"hand {name} not available: {exc}")
+    hand = _hand(name)
     g = torch.Generator().manual_seed(3)
     B = 8
     frac = 0.5 + 0.5 * torch.rand(B, hand.num_joints, generator=g)  # flexed: some pairs overlap
@@ -161,10 +160,7 @@ def test_culled_blocks_find_the_groups_of_the_whole_blocks(name):
     from datagen.synth.self_collision import _block_groups, _cluster_bounds, _dense_groups
     from datagen.scatter import index_add
 
-    try:
-        hand = load_hand(name)
-    except Exception as exc:  # noqa: BLE001 - optional hands (make hands)
-        pytest.skip(f"hand {name} not available: {exc}")
+    hand = _hand(name)
     g = torch.Generator().manual_seed(4)
     B = 12
     frac = torch.rand(B, hand.num_joints, generator=g)
