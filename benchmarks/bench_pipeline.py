@@ -29,9 +29,9 @@ processing and the targets dominate, and its extrapolation to 5000 objects.
 Twelve objects by default (~10 minutes on 2 cores for the scaling table): each of two workers
 runs six shards, so the 2-worker / 1-worker ratio measures the pipeline's parallel work rather
 than Ray's start-up (~4 s per job) and the last shard's tail, which weigh a third of the gap at
-four objects (same session: 4 objects 1.76, 12 objects 1.88; results/pipeline.md, Notes). The
-success counts are still small, so validated grasps per core-hour carries a sampling error;
-grasps per core-hour is the steadier throughput figure.
+four objects (same session: 4 objects 1.76, 12 objects 1.88; results/pipeline.md, its table of
+earlier measurements). The success counts are still small, so validated grasps per core-hour
+carries a sampling error; grasps per core-hour is the steadier throughput figure.
 """
 
 from __future__ import annotations
