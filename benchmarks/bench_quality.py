@@ -46,11 +46,13 @@ COLUMNS = ["object_id", "object_scale_m", "success", "reason", "synth_epsilon", 
            "touching_links"]
 
 
-def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict, manifest: Path = MANIFEST) -> None:
-    """``datagen run`` of the default force-closure job for ``hand`` (resumes a finished job)."""
+def run_job(hand: str, out: Path, grasps: int, objects: int, synth: dict, manifest: Path = MANIFEST,
+            num_cpus: int | None = None) -> None:
+    """``datagen run`` of the default force-closure job for ``hand`` (resumes a finished job);
+    ``num_cpus``: the job's worker CPUs (None: every core)."""
     cmd = [sys.executable, "-m", "datagen.cli", "run", "--out", str(out), "--manifest", str(manifest),
            "--objects", str(objects), "--hand", hand, "--tasks", "force_closure", "--grasps", str(grasps),
-           "--no-progress"]
+           "--no-progress"] + (["--num-cpus", str(num_cpus)] if num_cpus else [])
     if synth:
         cfg = out.with_suffix(".yaml")
         cfg.parent.mkdir(parents=True, exist_ok=True)
@@ -141,6 +143,7 @@ def main() -> None:
     ap.add_argument("--synth", default="{}", help="JSON SynthConfig overrides on the default job (a variant)")
     ap.add_argument("--work", type=Path, default=ROOT / ".cache" / "bench_quality", help="job directories")
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--num-cpus", type=int, default=None, help="worker CPUs of each job (default: every core)")
     ap.add_argument("--code", default=None, help="reuse the jobs made at this code version (default: this checkout's)")
     args = ap.parse_args()
     synth = json.loads(args.synth)
@@ -165,7 +168,7 @@ def main() -> None:
         if scales_arg:
             tag += "-s" + "_".join(f"{s:g}" for s in scales_arg)
         job = args.work / f"{hand}-{commit}-g{grasps}-o{args.objects}{tag}"
-        run_job(hand, job, grasps, args.objects, synth, manifest)
+        run_job(hand, job, grasps, args.objects, synth, manifest, args.num_cpus)
         section, headline[hand] = hand_section(hand, job, grasps, families)
         lines += section
     head, notes = _kept(args.out)
