@@ -190,17 +190,12 @@ def _idle_cores():
 def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, provenance: dict) -> dict:
     import torch
 
-    from datagen.objects.isolate import process_isolated
-    from datagen.objects.errors import ObjectError
-    from datagen.objects.manifest import ManifestEntry, resolve_scales
-    from datagen.objects.process import load_processed
-    from datagen.pipeline import BatchObject, run_batch
+    from datagen.pipeline import run_batch
 
     t_start, cpu_start, started = time.perf_counter(), time.process_time(), time.time()
     job = JobDir(job_path)
     cfg = JobConfig.from_dict(cfg_dict)
     recipes = same_recipes(job, cfg.recipes())
-    pcfg = recipes[0].process  # the tasks share the objects' processing
     torch.set_num_threads(max(1, int(cfg.cpus_per_shard)))
     device = "cuda" if torch.cuda.is_available() else "cpu"
     cache = provenance.get("cache") or None
@@ -210,31 +205,9 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
     timings = {"process_s": 0.0, "observe_s": 0.0, "target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0, "write_s": 0.0}
     fails: list[dict] = []
 
-    # 1. objects: processed in isolation, linked into the job directory
+    # 1. objects: processed in isolation, linked into the job directory (the tasks share the processing)
     t0 = time.perf_counter()
-    ready: list[BatchObject] = []
-    for d in entries:
-        e = ManifestEntry(**{**d, "scales": tuple(d["scales"])})
-        try:
-            p = process_isolated(e, pcfg, cache, cfg.object_timeout_s,
-                                 remedy="raise object_timeout_s and rerun with --retry-failed")
-            if not p.ok:
-                _failure(fails, index, e.id, "process", p.reason, p.message)
-                continue
-            rel = _link_into_job(p, job)
-            # the manifest's id, hash and scales (a built manifest has the config's); the object
-            # path relative to the job directory
-            processed = load_processed(job.path / rel)
-            ready.append(BatchObject(processed, resolve_scales(e.scales, processed.factor, e.id), object_id=e.id,
-                                     object_path=rel, mesh_sha256=e.sha256, split=e.split))
-        except ObjectError as exc:  # e.g. scale "native" on a mesh that is not in metres
-            _failure(fails, index, e.id, "process", exc.reason.value, str(exc))
-        except JobIOError:  # the job directory cannot be written (a full disk): the shard stops
-            raise
-        except Exception as exc:  # noqa: BLE001 - recorded, never fatal
-            _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
-        finally:
-            progress.add(1)
+    ready = _ready_objects(entries, recipes[0].process, cache, cfg, job, index, fails, progress)
     timings["process_s"] = time.perf_counter() - t0
 
     # 1b. what a learner sees of each object and scale (isolated too: the renderer is native code)
@@ -259,21 +232,84 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
 
     # 5. write: shard (if it has rows), failures, then the ledger entry
     t0 = time.perf_counter()
-    schema = arrow_schema("evaluated", nq=7 + hand.num_joints)
-    meta = dict(schema.metadata)
+    meta = _shard_metadata(hand, cfg, recipes, provenance, index)
+    out = batch.rows.replace_schema_metadata(meta)
+    files = _write_shard_files(job, index, out, observations, fails, cfg, provenance)
+    timings["write_s"] = time.perf_counter() - t0
+    n_ok = int(pc.sum(out["success"]).as_py() or 0) if out.num_rows else 0
+    summary = {"shard": index, "objects": len(entries), "objects_ok": len(ready), "grasps": out.num_rows,
+               "observations": observations.num_rows if observations is not None else 0,
+               "success": n_ok, "failures": len(fails), "host": socket.gethostname(), "device": device,
+               "timings": {k: round(v, 3) for k, v in timings.items()},
+               "wall_s": round(time.perf_counter() - t_start, 3),
+               "started_unix_s": round(started, 3), "finished_unix_s": round(time.time(), 3),
+               "cpu_s": round(time.process_time() - cpu_start, 3),  # this process (not the CoACD children)
+               "node": _node_id(), "seed": shard_seed(cfg, index), "config_hash": cfg.hash(),
+               "objects_per_shard": cfg.objects_per_shard, "files": files}
+    job.record_finished(index, summary)
+    progress.set(progress.total)
+    return summary
+
+
+def _ready_objects(entries: list[dict], pcfg, cache, cfg: JobConfig, job: JobDir, index: int, fails: list,
+                   progress: ShardProgress) -> list:
+    """The shard's objects processed in isolation (``datagen.objects.isolate``) and linked into the
+    job directory, as ``BatchObject``s with the manifest's id, hash and scales and the object's path
+    relative to the job directory; an object that fails is a row of ``fails`` and is left out."""
+    from datagen.objects.errors import ObjectError
+    from datagen.objects.isolate import process_isolated
+    from datagen.objects.manifest import ManifestEntry, resolve_scales
+    from datagen.objects.process import load_processed
+    from datagen.pipeline import BatchObject
+
+    ready = []
+    for d in entries:
+        e = ManifestEntry(**{**d, "scales": tuple(d["scales"])})
+        try:
+            p = process_isolated(e, pcfg, cache, cfg.object_timeout_s,
+                                 remedy="raise object_timeout_s and rerun with --retry-failed")
+            if not p.ok:
+                _failure(fails, index, e.id, "process", p.reason, p.message)
+                continue
+            rel = _link_into_job(p, job)
+            processed = load_processed(job.path / rel)
+            ready.append(BatchObject(processed, resolve_scales(e.scales, processed.factor, e.id), object_id=e.id,
+                                     object_path=rel, mesh_sha256=e.sha256, split=e.split))
+        except ObjectError as exc:  # e.g. scale "native" on a mesh that is not in metres
+            _failure(fails, index, e.id, "process", exc.reason.value, str(exc))
+        except JobIOError:  # the job directory cannot be written (a full disk): the shard stops
+            raise
+        except Exception as exc:  # noqa: BLE001 - recorded, never fatal
+            _failure(fails, index, e.id, "process", "error", f"{e.id}: {type(exc).__name__}: {exc}")
+        finally:
+            progress.add(1)
+    return ready
+
+
+def _shard_metadata(hand, cfg: JobConfig, recipes: list, provenance: dict, index: int) -> dict:
+    """The shard file's Parquet metadata: the evaluated schema's, plus the joint names, the
+    provenance, the shard's seed and every recipe with that seed."""
+    seed = shard_seed(cfg, index)
+    meta = dict(arrow_schema("evaluated", nq=7 + hand.num_joints).metadata)
     meta.update({k.encode(): (v if isinstance(v, str) else json.dumps(v, sort_keys=True)).encode() for k, v in {
         "datagen.joint_names": hand.joint_names, "datagen.code_version": provenance["code_version"],
         "datagen.config_hash": cfg.hash(), "datagen.packages": provenance["packages"],
         "datagen.host": socket.gethostname(), "datagen.job_created_at": provenance["created_at"],
         "datagen.written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "datagen.shard": str(index), "datagen.seed": str(shard_seed(cfg, index)),
-        "datagen.recipes": [dataclasses.replace(r, synth=dataclasses.replace(r.synth, seed=shard_seed(cfg, index)))
-                            .to_dict() for r in recipes],
-        "datagen.synth_config": dataclasses.replace(recipes[0].synth, seed=shard_seed(cfg, index)).to_dict(),
+        "datagen.shard": str(index), "datagen.seed": str(seed),
+        "datagen.recipes": [dataclasses.replace(r, synth=dataclasses.replace(r.synth, seed=seed)).to_dict()
+                            for r in recipes],
+        "datagen.synth_config": dataclasses.replace(recipes[0].synth, seed=seed).to_dict(),
         "datagen.eval_config": recipes[0].eval.to_dict(),
-        "datagen.process_config": pcfg.to_dict()}.items()})
-    out = batch.rows.replace_schema_metadata(meta)
-    files = {}  # the ledger's record of each file (size, rows, sha256): readers check them
+        "datagen.process_config": recipes[0].process.to_dict()}.items()})
+    return meta
+
+
+def _write_shard_files(job: JobDir, index: int, out: pa.Table, observations, fails: list, cfg: JobConfig,
+                       provenance: dict) -> dict:
+    """Writes the shard's rows (if any), its observations (if any) and its failures, each
+    atomically; returns the ledger's record of each file (size, rows, sha256: readers check them)."""
+    files = {}
     if out.num_rows:
         files[integrity.shard_file(index)] = write_table_atomic(out, job.shard_path(index))
     else:  # no rows: no shard file (some readers, e.g. Hugging Face datasets, reject empty Parquet files)
@@ -289,20 +325,7 @@ def _run_shard(job_path: str, index: int, entries: list[dict], cfg_dict: dict, p
         job.observations_path(index).unlink(missing_ok=True)
     files[integrity.failures_file(index)] = write_table_atomic(
         pa.Table.from_pylist(fails, schema=arrow_schema("failures")), job.shard_failures_path(index))
-    timings["write_s"] = time.perf_counter() - t0
-    n_ok = int(pc.sum(out["success"]).as_py() or 0) if out.num_rows else 0
-    summary = {"shard": index, "objects": len(entries), "objects_ok": len(ready), "grasps": out.num_rows,
-               "observations": observations.num_rows if observations is not None else 0,
-               "success": n_ok, "failures": len(fails), "host": socket.gethostname(), "device": device,
-               "timings": {k: round(v, 3) for k, v in timings.items()},
-               "wall_s": round(time.perf_counter() - t_start, 3),
-               "started_unix_s": round(started, 3), "finished_unix_s": round(time.time(), 3),
-               "cpu_s": round(time.process_time() - cpu_start, 3),  # this process (not the CoACD children)
-               "node": _node_id(), "seed": shard_seed(cfg, index), "config_hash": cfg.hash(),
-               "objects_per_shard": cfg.objects_per_shard, "files": files}
-    job.record_finished(index, summary)
-    progress.set(progress.total)
-    return summary
+    return files
 
 
 def _observe(ready: list, cfg: JobConfig, index: int, fails: list):
