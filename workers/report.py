@@ -294,78 +294,100 @@ def write_report(path: str | Path, renders: int = 6) -> Path:
              if job.failures_path.is_file() else None)
     cfg = doc["config"]
     obs = _observations(job)
-    md = [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}"), observations=_OBS_CONFIG if obs else ""),
-          f"# Dataset card: {job.path.name}", "",
-          f"Dexterous grasps of the **{cfg['hand']}** hand on {s['objects']} objects from `{cfg['source']}`, "
-          f"tasks {', '.join(cfg['tasks'])}, synthesized by `datagen` and verified in MuJoCo.", "",
-          f"- config hash `{doc['config_hash']}`, code `{doc['code_version']}`, created {doc['created_at']} "
-          f"on `{doc['host']}`",
-          f"- shards {s['shards_done']}/{s['shards_total']}{'' if s['complete'] else ' (incomplete)'}; "
-          f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
-          f"`object_path` points into `objects/` (relative to this directory)",
-          f"- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()),
-          _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), _protocol_line(doc, cfg["hand"]), "",
-          "## Outcome", ""]
-    md += _table(["grasps", "successful", "success rate", "objects failed"],
-                 [[s["grasps"], s["success"], f"{s['success_rate']:.1%}", fails.num_rows if fails is not None else 0]])
-    if rows is not None:
-        md += ["### By task and scale", ""]
-        groups: dict = {}
-        for t, sc, ok in zip(rows["task"].to_pylist(), rows["object_scale_m"].to_pylist(), rows["success"].to_pylist()):
-            g = groups.setdefault((t, round(sc, 4)), [0, 0])
-            g[0] += 1
-            g[1] += bool(ok)
-        md += _table(["task", "object_scale_m", "grasps", "success rate"],
-                     [[t, sc, n, f"{k / n:.1%}"] for (t, sc), (n, k) in sorted(groups.items())])
-        if "split" in rows.column_names:
-            splits, objs = rows["split"].to_pylist(), rows["object_id"].to_pylist()
-            md += ["### By split", ""]
-            md += _table(["split", "grasps", "objects"],
-                         [[sp, n, len({o for o, x in zip(objs, splits) if x == sp})]
-                          for sp, n in sorted(Counter(splits).items())])
-        md += ["### Grasp outcomes (reason codes)", ""]
-        md += _table(["reason", "grasps"], [[k, v] for k, v in s["eval_reasons"].items()])
-        md += ["### Metrics (successful grasps)", ""]
-        okr = rows.filter(pc.equal(rows["success"], True))
-        mrows = []
-        for col, unit, mult in (("penetration_m", "mm", 1000), ("sphere_penetration_m", "mm", 1000),
-                                ("epsilon", "", 1), ("synth_epsilon", "", 1), ("touching_links", "", 1)):
-            if okr.num_rows and col in okr.column_names:
-                v = okr[col].cast(pa.float64())
-                mrows.append([f"`{col}`", unit or "as stored", f"{pc.mean(v).as_py() * mult:.3g}",
-                              f"{pc.max(v).as_py() * mult:.3g}"])
-        md += _table(["column", "shown in", "mean", "max"], mrows) if mrows else ["no successful grasps", ""]
+    md = _header_section(job, doc, s, obs)
+    md += _outcome_section(rows, s, fails)
     md += _diversity_section(job.path, rows)
     md += _observations_section(obs, cfg)
-    md += ["## Failures (objects without rows)", ""]
-    if fails is not None and fails.num_rows:
-        md += _table(["stage", "reason", "objects"],
-                     [[k.split(':')[0], k.split(':', 1)[1], v] for k, v in Counter(
-                         f"{a}:{b}" for a, b in zip(fails["stage"].to_pylist(), fails["reason"].to_pylist())).items()])
-        md += ["Stages: `process` (object processing: mesh checks, CoACD), `target` (the synthesis target: surface "
-               "samples and SDF grid), `synth` (optimization), `eval` (MuJoCo).", ""]
-    else:
-        md += ["none", ""]
+    md += _failures_section(fails)
     md += ["## Where the time went (worker seconds)", ""]
     md += _table(["stage", "seconds"], [[k[:-2], f"{v:.1f}"] for k, v in s["stage_seconds"].items()])
     md += ["shard_wall / shard_cpu: wall and CPU seconds of the shard tasks (CPU excludes isolated CoACD "
            "processes).", ""]
     md += _columns_section(rows)
     md += ["## Reading", "", _READERS]
-    pics, note = _render(job, rows, renders)
-    md += ["## Grasps", "",
-           "Browse these grasps in 3D: run `datagen view <this job directory>` and open the printed URL "
-           "(on a remote machine, first `ssh -L 8080:localhost:8080 <user>@<host>`, then open "
-           "http://localhost:8080/); `datagen view <job> --export DIR` writes self-contained HTML pages of a "
-           "few grasps. The pictures below are static renders.", ""]
-    if pics:
-        md += ["Each picture: columns = hand at the pregrasp, the grasp, after pregrasp -> grasp -> squeeze in "
-               "MuJoCo; rows = two views (from beyond the object towards the palm, and 90 degrees around).", ""]
-        for i, (p, caption) in enumerate(pics, 1):
-            md += [f"![{p}]({p})", "", f"{i}. {caption}", ""]
-    else:
-        md += [note, ""]
+    md += _grasps_section(job, rows, renders)
     md += ["## Config", "", "```json", json.dumps(cfg, indent=1, sort_keys=True), "```", ""]
     with writing(out, "the dataset card"):
         atomic_write_text(out, "\n".join(md))
     return out
+
+
+def _header_section(job: JobDir, doc: dict, s: dict, obs) -> list[str]:
+    """The card's front matter, title, provenance lines and the ``## Outcome`` heading."""
+    cfg = doc["config"]
+    return [_FRONT_MATTER.format(name=json.dumps(f"datagen {job.path.name}"), observations=_OBS_CONFIG if obs else ""),
+            f"# Dataset card: {job.path.name}", "",
+            f"Dexterous grasps of the **{cfg['hand']}** hand on {s['objects']} objects from `{cfg['source']}`, "
+            f"tasks {', '.join(cfg['tasks'])}, synthesized by `datagen` and verified in MuJoCo.", "",
+            f"- config hash `{doc['config_hash']}`, code `{doc['code_version']}`, created {doc['created_at']} "
+            f"on `{doc['host']}`",
+            f"- shards {s['shards_done']}/{s['shards_total']}{'' if s['complete'] else ' (incomplete)'}; "
+            f"files `shards/part-NNNNN.parquet` (schema `evaluated`, see `schemas/`), `failures.parquet`; "
+            f"`object_path` points into `objects/` (relative to this directory)",
+            "- packages: " + ", ".join(f"{k} {v}" for k, v in doc["packages"].items()),
+            _evaluation_line(cfg.get("eval") or {}, doc["code_version"]), _protocol_line(doc, cfg["hand"]), "",
+            "## Outcome", ""]
+
+
+def _outcome_section(rows, s: dict, fails) -> list[str]:
+    """The outcome table, and with rows: success by task and scale, by split, the reason codes and
+    the successes' metrics."""
+    md = _table(["grasps", "successful", "success rate", "objects failed"],
+                [[s["grasps"], s["success"], f"{s['success_rate']:.1%}", fails.num_rows if fails is not None else 0]])
+    if rows is None:
+        return md
+    md += ["### By task and scale", ""]
+    groups: dict = {}
+    for t, sc, ok in zip(rows["task"].to_pylist(), rows["object_scale_m"].to_pylist(), rows["success"].to_pylist()):
+        g = groups.setdefault((t, round(sc, 4)), [0, 0])
+        g[0] += 1
+        g[1] += bool(ok)
+    md += _table(["task", "object_scale_m", "grasps", "success rate"],
+                 [[t, sc, n, f"{k / n:.1%}"] for (t, sc), (n, k) in sorted(groups.items())])
+    if "split" in rows.column_names:
+        splits, objs = rows["split"].to_pylist(), rows["object_id"].to_pylist()
+        md += ["### By split", ""]
+        md += _table(["split", "grasps", "objects"],
+                     [[sp, n, len({o for o, x in zip(objs, splits) if x == sp})]
+                      for sp, n in sorted(Counter(splits).items())])
+    md += ["### Grasp outcomes (reason codes)", ""]
+    md += _table(["reason", "grasps"], [[k, v] for k, v in s["eval_reasons"].items()])
+    md += ["### Metrics (successful grasps)", ""]
+    okr = rows.filter(pc.equal(rows["success"], True))
+    mrows = []
+    for col, unit, mult in (("penetration_m", "mm", 1000), ("sphere_penetration_m", "mm", 1000),
+                            ("epsilon", "", 1), ("synth_epsilon", "", 1), ("touching_links", "", 1)):
+        if okr.num_rows and col in okr.column_names:
+            v = okr[col].cast(pa.float64())
+            mrows.append([f"`{col}`", unit or "as stored", f"{pc.mean(v).as_py() * mult:.3g}",
+                          f"{pc.max(v).as_py() * mult:.3g}"])
+    return md + (_table(["column", "shown in", "mean", "max"], mrows) if mrows else ["no successful grasps", ""])
+
+
+def _failures_section(fails) -> list[str]:
+    """Objects without rows, by stage and reason."""
+    md = ["## Failures (objects without rows)", ""]
+    if fails is None or not fails.num_rows:
+        return md + ["none", ""]
+    md += _table(["stage", "reason", "objects"],
+                 [[k.split(':')[0], k.split(':', 1)[1], v] for k, v in Counter(
+                     f"{a}:{b}" for a, b in zip(fails["stage"].to_pylist(), fails["reason"].to_pylist())).items()])
+    return md + ["Stages: `process` (object processing: mesh checks, CoACD), `target` (the synthesis target: surface "
+                 "samples and SDF grid), `synth` (optimization), `eval` (MuJoCo).", ""]
+
+
+def _grasps_section(job: JobDir, rows, renders: int) -> list[str]:
+    """How to browse the grasps, and ``renders`` static pictures (or why there are none)."""
+    pics, note = _render(job, rows, renders)
+    md = ["## Grasps", "",
+          "Browse these grasps in 3D: run `datagen view <this job directory>` and open the printed URL "
+          "(on a remote machine, first `ssh -L 8080:localhost:8080 <user>@<host>`, then open "
+          "http://localhost:8080/); `datagen view <job> --export DIR` writes self-contained HTML pages of a "
+          "few grasps. The pictures below are static renders.", ""]
+    if not pics:
+        return md + [note, ""]
+    md += ["Each picture: columns = hand at the pregrasp, the grasp, after pregrasp -> grasp -> squeeze in "
+           "MuJoCo; rows = two views (from beyond the object towards the palm, and 90 degrees around).", ""]
+    for i, (p, caption) in enumerate(pics, 1):
+        md += [f"![{p}]({p})", "", f"{i}. {caption}", ""]
+    return md
