@@ -147,47 +147,9 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
         task = ray.remote(run_shard).options(num_cpus=cfg.cpus_per_shard, num_gpus=gpus, max_retries=TASK_RETRIES,
                                              retry_exceptions=False)
         cfg_d = cfg.to_dict()
-        refs = {}
-        for i in todo:
-            a, b = slices[i]
-            shard_entries = [{**e.__dict__, "scales": list(e.scales)} for e in entries[a:b]]
-            refs[task.remote(str(job.path), i, shard_entries, cfg_d, provenance)] = i
-        bar = None
-        finished_objects = float(len(entries) - sum(slices[i][1] - slices[i][0] for i in todo))
-        if progress:
-            from tqdm import tqdm
-            bar = tqdm(total=len(entries), initial=finished_objects, desc="objects", unit="obj", file=sys.stderr,
-                       smoothing=0.05, bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} "
-                                                  "[{elapsed}<{remaining}{postfix}]")
-        grasps = ok = 0
-        errors: dict[int, str] = {}
-        pending = list(refs)
+        refs = {task.remote(str(job.path), i, _shard_entries(entries, slices[i]), cfg_d, provenance): i for i in todo}
         t0 = time.perf_counter()
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
-            for ref in ready:
-                i = refs[ref]
-                try:
-                    s = ray.get(ref)
-                    grasps, ok = grasps + s["grasps"], ok + s["success"]
-                except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
-                    cause = getattr(exc, "cause", None)
-                    if isinstance(cause, JobIOError):  # a full disk: every other shard would fail the same way
-                        for r in pending:
-                            ray.cancel(r, force=True)
-                        if bar is not None:
-                            bar.close()
-                        raise cause from None
-                    errors[i] = error_line(exc)
-                    log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
-                finished_objects += slices[i][1] - slices[i][0]
-            if bar is not None:
-                running = [refs[r] for r in pending]
-                bar.update(finished_objects + _progress_units(job, slices, running) - bar.n)
-                bar.set_postfix(shards=f"{len(refs) - len(pending)}/{len(refs)}", grasps=grasps,
-                                success=f"{ok / max(grasps, 1):.0%}", refresh=False)
-        if bar is not None:
-            bar.close()
+        errors = _collect(ray, job, refs, entries, slices, todo, progress, log)
         log(f"ran {len(todo)} shards in {time.perf_counter() - t0:.1f} s")
         return errors
     finally:
@@ -197,5 +159,53 @@ def _run_on_ray(ray, job, cfg, entries, slices, todo, provenance, address, num_c
             reaper.close()
         if private_tmp:
             shutil.rmtree(private_tmp, ignore_errors=True)
+
+
+def _shard_entries(entries: list, span: tuple[int, int]) -> list[dict]:
+    """The manifest entries ``entries[a:b]`` of one shard as plain dicts (what a Ray task takes)."""
+    a, b = span
+    return [{**e.__dict__, "scales": list(e.scales)} for e in entries[a:b]]
+
+
+def _collect(ray, job: JobDir, refs: dict, entries: list, slices, todo: list[int], progress: bool, log) -> dict:
+    """Waits for the shard tasks ``refs`` (ref -> shard index), updating the progress bar; returns
+    {shard: error line} of the shards that failed (a rerun redoes them). A full disk in any shard
+    cancels the others and raises its `JobIOError`."""
+    bar = None
+    finished_objects = float(len(entries) - sum(slices[i][1] - slices[i][0] for i in todo))
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(entries), initial=finished_objects, desc="objects", unit="obj", file=sys.stderr,
+                   smoothing=0.05, bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total} "
+                                              "[{elapsed}<{remaining}{postfix}]")
+    grasps = ok = 0
+    errors: dict[int, str] = {}
+    pending = list(refs)
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
+        for ref in ready:
+            i = refs[ref]
+            try:
+                s = ray.get(ref)
+                grasps, ok = grasps + s["grasps"], ok + s["success"]
+            except Exception as exc:  # noqa: BLE001 - the shard stays unfinished; a rerun redoes it
+                cause = getattr(exc, "cause", None)
+                if isinstance(cause, JobIOError):  # a full disk: every other shard would fail the same way
+                    for r in pending:
+                        ray.cancel(r, force=True)
+                    if bar is not None:
+                        bar.close()
+                    raise cause from None
+                errors[i] = error_line(exc)
+                log(f"shard {i} failed: {errors[i]} (rerun the command to retry it)")
+            finished_objects += slices[i][1] - slices[i][0]
+        if bar is not None:
+            running = [refs[r] for r in pending]
+            bar.update(finished_objects + _progress_units(job, slices, running) - bar.n)
+            bar.set_postfix(shards=f"{len(refs) - len(pending)}/{len(refs)}", grasps=grasps,
+                            success=f"{ok / max(grasps, 1):.0%}", refresh=False)
+    if bar is not None:
+        bar.close()
+    return errors
 
 
