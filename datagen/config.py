@@ -189,41 +189,9 @@ def _coerce(tp: Any, v: Any, thing: str, err: type[ConfigError]) -> Any:
         return err.make(thing, f"must be {_describe(tp)}, got {v!r}", extra)
 
     if origin in (Union, types.UnionType):
-        if v is None and type(None) in args:
-            return None
-        first: ConfigError | None = None
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _coerce(a, v, thing, err)
-            except ConfigError as exc:
-                first = first or exc
-        # one non-null alternative: its own (more precise) message; several: name them all
-        if first is not None and sum(a is not type(None) for a in args) == 1:
-            raise first
-        raise bad()
-    if tp is type(None):
-        if v is not None:
-            raise bad()
-        return None
-    if tp is bool:
-        if not isinstance(v, bool):
-            raise bad()
-        return v
-    if tp is int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise bad()
-        return v
-    if tp is float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            hint = "YAML reads 1e4 as a string: write 1.0e4" if isinstance(v, str) else ""
-            raise bad(hint)
-        return float(v)
-    if tp is str:
-        if not isinstance(v, str):
-            raise bad()
-        return v
+        return _coerce_union(args, v, thing, err, bad)
+    if tp in _SCALARS:
+        return _coerce_scalar(tp, v, bad)
     if origin is tuple:
         if not isinstance(v, (list, tuple)):
             raise bad()
@@ -247,4 +215,45 @@ def _coerce(tp: Any, v: Any, thing: str, err: type[ConfigError]) -> Any:
         if not isinstance(v, (list, tuple)):
             raise bad()
         return list(v)
+    return v
+
+
+_SCALARS = (type(None), bool, int, float, str)
+
+
+def _coerce_union(args: tuple, v: Any, thing: str, err: type[ConfigError], bad) -> Any:
+    """``v`` as the first alternative of a union that takes it; None for an optional's None."""
+    if v is None and type(None) in args:
+        return None
+    first: ConfigError | None = None
+    for a in args:
+        if a is type(None):
+            continue
+        try:
+            return _coerce(a, v, thing, err)
+        except ConfigError as exc:
+            first = first or exc
+    # one non-null alternative: its own (more precise) message; several: name them all
+    if first is not None and sum(a is not type(None) for a in args) == 1:
+        raise first
+    raise bad()
+
+
+def _coerce_scalar(tp: type, v: Any, bad) -> Any:
+    """``v`` checked as None, bool, int (not a bool), float (an int becomes a float) or str."""
+    if tp is type(None):
+        ok = v is None
+    elif tp is bool:
+        ok = isinstance(v, bool)
+    elif tp is int:
+        ok = isinstance(v, int) and not isinstance(v, bool)
+    elif tp is float:
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if not ok:
+            raise bad("YAML reads 1e4 as a string: write 1.0e4" if isinstance(v, str) else "")
+        return float(v)
+    else:
+        ok = isinstance(v, str)
+    if not ok:
+        raise bad()
     return v
