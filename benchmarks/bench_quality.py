@@ -36,7 +36,7 @@ import numpy as np
 from benchmarks.common import machine_description
 from datagen.io import read_job
 from datagen.objects.manifest import load_manifest
-from workers.job import JobConfig, code_version
+from workers.job import JobConfig, JobDir, code_version
 
 ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = ROOT / "manifests" / "real_dev.jsonl"
@@ -103,7 +103,7 @@ def diversity_lines(hand: str, rows: dict, scales: np.ndarray) -> list[str]:
 def hand_section(hand: str, job: Path, grasps: int, families: dict) -> tuple[list[str], dict]:
     """The page's section of one hand's job and its success per scale."""
     rows = read_job(job, columns=COLUMNS + ["grasp_qpos"]).to_pydict()
-    ledger = [json.loads(p.read_text()) for p in sorted((job / "ledger").glob("*.json"))]
+    ledger = list(JobDir(job).audit().finished.values())  # the shards' ledger entries
     synth_s = sum(x["timings"].get("synth_s", 0) for x in ledger)
     shard_wall = sum(x.get("wall_s", 0) for x in ledger)
     n = len(rows["success"])
