@@ -55,15 +55,17 @@ PRESETS: dict[str, dict[str, Any]] = {
     # 120 iterations) raised six-direction success on the real-object set from 38% to 73% (Shadow,
     # 8 starts) and the 0.08 m probe from 68% to 82% (16; benchmarks/results/quality.md); 300
     # iterations; a 48^3 SDF grid (~10 s per object on one core) and the fast CoACD setting.
-    # Objects of 0.09-0.13 m get power grasps (palm and phalanges in the contact set): Shadow on
+    # Objects above 0.09 m get power grasps (palm and phalanges in the contact set): Shadow on
     # the real development objects 44% -> 69% at 0.10 m and 25% -> 44% at 0.12 m, held out
     # 20% -> 50% at 0.12 m, the other hands unchanged (issue 41, benchmarks/results/quality.md).
-    # At 0.15 m power grasps held less (Shadow 11% -> 0%); the fingertip grasps at 0.06-0.08 m
-    # are unchanged. The power type starts pre-curled and keeps out of the convex pieces (issue
-    # 41's third round): Shadow 58% / 36% -> 78% / 36%, held out 55% / 45% -> 70% / 55%, E3M5
+    # The fingertip grasps at 0.06-0.08 m are unchanged. The power type starts pre-curled and
+    # keeps out of the convex pieces (issue 41's third round): Shadow 58% / 36% -> 78% / 36%, held out 55% / 45% -> 70% / 55%, E3M5
     # 42% / 33% -> 67% / 50%, successes' penetration p90 <= 0.6 mm (benchmarks/results/sizes.md);
     # its starts face the object across its longest axis (fourth round, `init.kind: wrap`): E3M5
-    # 54% / 46% -> 83% / 71%, Shadow 78% / 39% -> 69% / 53%, LEAP 92% / 75% -> 83% / 67%.
+    # 54% / 46% -> 83% / 71%, Shadow 78% / 39% -> 69% / 53%, LEAP 92% / 75% -> 83% / 67%. With
+    # those starts power grasps hold bigger objects too: at 0.15 m 66 of 112 rows over the four
+    # hands against the fingertip grasps' 43 (Shadow 7% -> 43%, E3M5 21% -> 54%, Allegro 61% ->
+    # 86%, LEAP 64% -> 54%; benchmarks/results/quality.md), so every object above 0.09 m gets them.
     # An object lying flat on a table (its top at most 4 cm above it) gets edge pinches (issue 45):
     # Shadow on the flat development objects 40% -> 70% lifted (benchmarks/results/tabletop.md).
     # So does every other object up to 0.09 m on a table (the claw from above, its tabletop mix):
@@ -72,8 +74,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "dataset": {"synth": {"iters": 300, "seeds_per_grasp": 16}, "process": dict(_FAST_PROCESS),
                 "grid_resolution": 48,
                 "grasp_types": {"bands": [{"max_scale_m": 0.09, "mix": {"precision": 1.0}, "tabletop": {"edge_pinch": 1.0}},
-                                          {"max_scale_m": 0.13, "mix": {"power": 1.0}},
-                                          {"mix": {"precision": 1.0}}],
+                                          {"mix": {"power": 1.0}}],
                                 "flat": {"max_height_m": 0.04, "mix": {"edge_pinch": 1.0}}}},
     # The paper's synthesis: one start per pose, 500 iterations (the library defaults), a 64^3
     # grid, the objects package's CoACD defaults (threshold 0.05) and fingertip grasps only.

@@ -86,7 +86,7 @@ def test_a_types_synth_block_reaches_its_grasps_and_the_users_config_wins(monkey
     target = SimpleNamespace(scale=0.10, support_plane=None)
     for config, want in (({}, (True, 0.75)), ({"synth": {"penetration_pieces": False}}, (False, 0.75)),
                          ({"synth": {"sphere_margin_scale": 1.0}}, (True, 1.0))):
-        r = resolve("shadow", config=config)  # the dataset preset: power grasps at 0.09-0.13 m
+        r = resolve("shadow", config=config)  # the dataset preset: power grasps above 0.09 m
         with pytest.raises(Stop):
             batch.synthesize_rows(None, [target], load_task("force_closure"), r.synth, 1,
                                   grasp_types=r.grasp_types, type_synth=r.grasp_type_synth)
