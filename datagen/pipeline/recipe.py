@@ -146,15 +146,16 @@ def _differences(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _grasp_type_layers(mix: GraspMix, below: list, above: list, synth: SynthConfig, extra: Mapping[str, Any],
-                       where: str) -> dict[str, Any]:
-    """`Recipe.grasp_type_synth`: for each type of ``mix`` with a ``synth:`` block, its layer
-    between the layers ``below`` (defaults to task) and ``above`` (config, flags), as the fields
-    that differ from ``synth`` (the recipe's without it); ``extra``: the fields set by the recipe."""
+                       where: str, hand_name: str) -> dict[str, Any]:
+    """`Recipe.grasp_type_synth`: for each type of ``mix`` with a ``synth:`` block (its ``hands``
+    entry for ``hand_name`` merged over it), its layer between the layers ``below`` (defaults to
+    task) and ``above`` (config, flags), as the fields that differ from ``synth`` (the recipe's
+    without it); ``extra``: the fields set by the recipe."""
     from datagen.tasks.grasp_type import load_grasp_type
 
     out: dict[str, Any] = {}
     for name in mix.types():
-        block = dict(load_grasp_type(name).synth)
+        block = dict(load_grasp_type(name).for_hand(hand_name).synth)
         if not block:
             continue
         layered = merge_layers(*below, {"synth": block}, *above).get("synth", {})
@@ -206,10 +207,15 @@ def squeeze_kp(hand: str | Path, ev: EvalConfig) -> float:
     """The stiffness (N m/rad) of the hand's finger actuators in the evaluation: the squeeze is
     computed for it (`datagen.eval.protocol.hand_gains`; a spec path's hand by its spec's name)."""
     from datagen.eval.protocol import hand_gains
+
+    return float(hand_gains(ev, hand_name(hand), 0.0).kp)
+
+
+def hand_name(hand: str | Path) -> str:
+    """A built-in hand's name, or the name in the spec of a spec path."""
     from datagen.hands import BUILTIN_HANDS, load_spec
 
-    name = str(hand) if str(hand) in BUILTIN_HANDS else load_spec(hand).name
-    return float(hand_gains(ev, name, 0.0).kp)
+    return str(hand) if str(hand) in BUILTIN_HANDS else load_spec(hand).name
 
 
 def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset: str | None = None,
@@ -241,4 +247,4 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
                           "use scene tabletop with force-closure tasks (the six-direction test becomes the lift)")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
                   grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
-                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where))
+                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, hand_name(hand)))

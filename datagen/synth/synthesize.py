@@ -345,7 +345,7 @@ def synthesize(hand, targets, task: TaskSpec, cfg: SynthConfig, num_per_object: 
 
     t0 = time.perf_counter()
     cfg.check_task(task)
-    gt = load_grasp_type(cfg.grasp_type)
+    gt = load_grasp_type(cfg.grasp_type).for_hand(hand.name)  # the type's `hands:` entry (init) for this hand
     cfg = cfg.for_hand(hand)  # the hand's sphere margin
     threads = torch.get_num_threads() if threads is None else int(threads)
     task = task.for_hand(hand.name)  # the task's `hands:` entry for this hand (init, fingers), if any

@@ -17,12 +17,12 @@ Modules: ``spec`` (TaskSpec, InitConfig, loading), ``evaluation`` (the ``eval`` 
 
 from .evaluation import (EVAL_KEYS, TaskTest, builtin_task_test, has_builtin_test, task_object, task_scenery,
                          task_test_from_spec)
-from .grasp_type import FlatBand, GraspBand, GraspMix, GraspType, builtin_grasp_types, load_grasp_type
+from .grasp_type import FlatBand, GraspBand, GraspMix, GraspType, GraspTypeHand, builtin_grasp_types, load_grasp_type
 from .pairing import task_object_id, task_targets
 from .spec import SPEC_DIR, HandOverride, InitConfig, TaskSpec, builtin_tasks, load_task
 
 __all__ = [
-    "EVAL_KEYS", "SPEC_DIR", "FlatBand", "GraspBand", "GraspMix", "GraspType", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_grasp_types", "builtin_task_test", "builtin_tasks",
+    "EVAL_KEYS", "SPEC_DIR", "FlatBand", "GraspBand", "GraspMix", "GraspType", "GraspTypeHand", "HandOverride", "InitConfig", "TaskSpec", "TaskTest", "builtin_grasp_types", "builtin_task_test", "builtin_tasks",
     "has_builtin_test", "load_grasp_type", "load_task", "task_object", "task_object_id", "task_scenery", "task_targets",
     "task_test_from_spec",
 ]

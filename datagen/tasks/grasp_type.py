@@ -11,7 +11,13 @@ links beyond the fingertips that take part in the grasp, by role, so one file se
 plus ``init`` (`datagen.tasks.InitConfig` fields over the task's: a palm distance, closing the
 fingers onto the object) and ``synth`` (`datagen.synth.SynthConfig` fields for this type's grasps,
 a mapping such as ``weights`` merged key by key: an energy term, more starts; a layer of the recipe
-between the task and the user's config, `datagen.pipeline.recipe`). ``precision`` is the fingertip grasp of the paper (no extra contacts);
+between the task and the user's config, `datagen.pipeline.recipe`). A ``hands`` block adapts the
+type to one hand, as a task's does: per hand name, ``init`` and ``synth`` fields over the type's
+own (`GraspType.for_hand`; the recipe of that hand records the synth layer it gives)::
+
+    hands:
+      leap: {init: {distance_m: [0.015, 0.04]}}
+ ``precision`` is the fingertip grasp of the paper (no extra contacts);
 ``power`` adds the palm and the phalanges.
 
 Which type a grasp gets is the recipe's ``grasp_types`` (a `GraspMix`: per object size, a share
@@ -23,7 +29,7 @@ its own contact set: its rows record ``task``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -32,12 +38,41 @@ from datagen.errors import ConfigError
 from datagen.tasks.spec import builtin_names, builtin_or_file
 
 __all__ = ["CONTACT_MODES", "CONTACT_ROLES", "GRASP_TYPE_DIR", "TASK_GRASP_TYPE", "FlatBand", "GraspBand", "GraspMix",
-           "GraspType", "builtin_grasp_types", "load_grasp_type"]
+           "GraspType", "GraspTypeHand", "builtin_grasp_types", "load_grasp_type"]
 
 GRASP_TYPE_DIR = Path(__file__).parent / "grasp_types"
 CONTACT_ROLES = ("palm", "phalanges")
 CONTACT_MODES = ("pull", "candidate")
 TASK_GRASP_TYPE = "task"  #: the grasp_type of rows of a task that names its own fingertips
+FIXED_SYNTH = ("grasp_type", "task", "seed", "squeeze_kp")  #: synth fields the job sets, never a grasp type
+
+
+def _check_fields(where: str, init: Mapping[str, Any], synth: Mapping[str, Any]) -> None:
+    """Refuse ``init`` fields that are not `InitConfig`'s and ``synth`` fields the job sets."""
+    from datagen.tasks.spec import InitConfig
+
+    unknown = sorted(set(init) - set(InitConfig.__dataclass_fields__))
+    if unknown:
+        raise ConfigError(f"{where}: unknown init field(s) {unknown}", f"known: {sorted(InitConfig.__dataclass_fields__)}")
+    fixed = sorted(set(synth) & set(FIXED_SYNTH))
+    if fixed:  # (unknown fields and bad values: refused by the recipe's resolution, naming the type)
+        raise ConfigError(f"{where}: synth.{fixed[0]} is set by the job, not by a grasp type")
+
+
+def _merged(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
+    """``b`` over ``a``, nested mappings merged key by key."""
+    out = dict(a)
+    for k, v in dict(b).items():
+        out[k] = _merged(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
+    return out
+
+
+@dataclass(frozen=True)
+class GraspTypeHand(Config):
+    """A grasp type's adaptation to one hand: ``init`` and ``synth`` fields over the type's own."""
+
+    init: Mapping[str, Any] = field(default_factory=dict)  #: `InitConfig` fields
+    synth: Mapping[str, Any] = field(default_factory=dict)  #: `SynthConfig` fields (mappings merged key by key)
 
 
 @dataclass(frozen=True)
@@ -52,6 +87,8 @@ class GraspType(Config):
     #: `SynthConfig` fields of this type's grasps (mappings merged key by key), e.g. ``weights``:
     #: over the task's, under the user's config and flags (`datagen.pipeline.Recipe.synth_for`)
     synth: Mapping[str, Any] = field(default_factory=dict)
+    #: hand name -> `GraspTypeHand` (its ``init`` / ``synth`` fields over the type's, for that hand only)
+    hands: Mapping[str, GraspTypeHand] = field(default_factory=dict)
 
     def __post_init__(self):
         from datagen.tasks.spec import InitConfig
@@ -66,13 +103,31 @@ class GraspType(Config):
             if mode not in CONTACT_MODES:
                 raise ConfigError(f"grasp type {self.name!r}: contacts.{role} must be one of {list(CONTACT_MODES)}, "
                                   f"got {mode!r}")
-        unknown = sorted(set(self.init) - set(InitConfig.__dataclass_fields__))
-        if unknown:
-            raise ConfigError(f"grasp type {self.name!r}: unknown init field(s) {unknown}",
-                              f"known: {sorted(InitConfig.__dataclass_fields__)}")
-        fixed = sorted(set(self.synth) & {"grasp_type", "task", "seed", "squeeze_kp"})
-        if fixed:  # (unknown fields and bad values: refused by the recipe's resolution, naming the type)
-            raise ConfigError(f"grasp type {self.name!r}: synth.{fixed[0]} is set by the job, not by a grasp type")
+        _check_fields(f"grasp type {self.name!r}", self.init, self.synth)
+        if not isinstance(self.hands, Mapping):
+            raise ConfigError(f"grasp type {self.name!r}: hands must map hand names to {{init, synth}}, "
+                              f"got {type(self.hands).__name__}")
+        hands = {}
+        for k, v in dict(self.hands).items():
+            where = f"grasp type {self.name!r}: hands.{k}"
+            if not isinstance(k, str) or not k:
+                raise ConfigError(f"grasp type {self.name!r}: hands: a hand name must be a non-empty string, got {k!r}")
+            hands[k] = v if isinstance(v, GraspTypeHand) else GraspTypeHand.from_dict(v, where)
+            _check_fields(where, hands[k].init, hands[k].synth)
+        object.__setattr__(self, "hands", hands)
+        for k in hands:  # every hand's init must be a valid InitConfig (over the defaults)
+            try:
+                InitConfig.from_dict({**InitConfig().to_dict(), **dict(self.for_hand(k).init)})
+            except ConfigError as e:
+                raise ConfigError(f"grasp type {self.name!r}: hands.{k}.init: {e}") from None
+
+    def for_hand(self, hand_name: str) -> "GraspType":
+        """This type as hand ``hand_name`` gets it: its ``hands`` entry's ``init`` and ``synth``
+        fields over the type's (nested mappings merged key by key); the result has no ``hands``."""
+        o = self.hands.get(hand_name)
+        if o is None:
+            return self if not self.hands else replace(self, hands={})
+        return replace(self, init={**dict(self.init), **dict(o.init)}, synth=_merged(self.synth, o.synth), hands={})
 
     def role(self, name: str) -> str | None:
         """``"pull"``, ``"candidate"`` or None (the role takes no part)."""

@@ -78,3 +78,22 @@ def test_mix_by_size_gives_each_scale_its_type_and_keeps_the_fingertip_rows(hand
     pinch = dataclasses.replace(task, name="pinch", fingers=("th", "ff"))
     res, tb = synthesize_rows(hand, balls[1:], pinch, CFG, 1, grasp_types=mix)
     assert tb.column("grasp_type").to_pylist() == ["task"]
+
+
+@pytest.mark.slow
+def test_a_types_hands_entry_reaches_that_hands_initial_poses(hand, balls, tmp_path):
+    """``hands.shadow.init`` pre-curls Shadow's fingers (the joints `curled_joints` gives), from the
+    same roots as the type without it; an entry for another hand leaves Shadow's start open."""
+    from datagen.synth.init import curled_joints
+
+    task, cfg = load_task("force_closure"), dataclasses.replace(CFG, iters=1)
+    base = tmp_path / "grip.yaml"
+    base.write_text("name: grip\ncontacts: {palm: pull}\n")
+    own, other = tmp_path / "grip_own.yaml", tmp_path / "grip_other.yaml"
+    own.write_text("name: grip_own\ncontacts: {palm: pull}\nhands: {shadow: {init: {curl: 0.3}}}\n")
+    other.write_text("name: grip_other\ncontacts: {palm: pull}\nhands: {leap: {init: {curl: 0.3}}}\n")
+    b, o, x = (synthesize(hand, balls[1:], task, dataclasses.replace(cfg, grasp_type=str(p)), 3)
+               for p in (base, own, other))
+    assert torch.equal(o.initial[:, :7], b.initial[:, :7]) and torch.equal(x.initial, b.initial)
+    assert torch.allclose(o.initial[:, 7:], curled_joints(hand, 0.3).expand(3, -1))
+    assert not torch.allclose(b.initial[:, 7:], o.initial[:, 7:])

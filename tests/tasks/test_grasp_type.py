@@ -22,6 +22,12 @@ def test_builtin_grasp_types_load_and_name_their_contacts():
     ({"name": "a b"}, "simple identifier"),
     ({"name": "x", "synth": {"seed": 3}}, "set by the job"),
     ({"name": "x", "extra": {}}, "extra"),
+    ({"name": "x", "hands": {"leap": {"init": {"distance": [0, 1]}}}}, r"hands\.leap: unknown init field\(s\) \['distance'\]"),
+    ({"name": "x", "hands": {"leap": {"synth": {"task": "t"}}}}, r"hands\.leap: synth\.task is set by the job"),
+    ({"name": "x", "hands": {"leap": {"init": {"distance_m": [0.04, 0.01]}}}}, r"hands\.leap\.init.*increasing pair"),
+    ({"name": "x", "init": {"curl": 0.3}, "hands": {"leap": {"init": {"curl": 1.5}}}}, r"hands\.leap\.init.*curl"),
+    ({"name": "x", "hands": {"leap": {"fingers": ["th"]}}}, r"hands\.leap.*fingers"),
+    ({"name": "x", "hands": ["leap"]}, "hands"),
 ])
 def test_bad_grasp_type_is_named(data, match):
     with pytest.raises(ConfigError, match=match):
@@ -39,6 +45,28 @@ def test_grasp_type_yaml_file_and_unknown_name(tmp_path):
     assert init.distance_m == (0.01, 0.02) and init.kind == "surround"
     with pytest.raises(ConfigError, match="unknown grasp type 'pwr'"):
         load_grasp_type("pwr")
+
+
+def test_a_hands_entry_goes_over_the_type_for_that_hand_only(tmp_path):
+    """``hands.leap``: its init fields replace the type's, its synth mappings merge key by key into
+    the type's block, for LEAP's recipe only; Shadow's recipe gets the type's own layer."""
+    from datagen.pipeline import resolve
+
+    p = tmp_path / "grip.yaml"
+    p.write_text("name: grip\ncontacts: {palm: pull}\ninit: {kind: wrap, curl: 0.3, distance_m: [0.03, 0.06]}\n"
+                 "synth: {weights: {penetration: 50.0}, iters: 200}\n"
+                 "hands:\n  leap: {init: {distance_m: [0.015, 0.04]}, synth: {weights: {distance: 7.0}}}\n")
+    t = load_grasp_type(p)
+    leap, shadow = t.for_hand("leap"), t.for_hand("shadow")
+    assert dict(leap.init) == {"kind": "wrap", "curl": 0.3, "distance_m": [0.015, 0.04]} and not leap.hands
+    assert dict(leap.synth) == {"weights": {"penetration": 50.0, "distance": 7.0}, "iters": 200}
+    assert (dict(shadow.init), dict(shadow.synth)) == (dict(t.init), dict(t.synth)) and not shadow.hands
+    from datagen.tasks import load_task
+
+    assert leap.apply_init(load_task("force_closure").init).distance_m == (0.015, 0.04)
+    lc, sc = (resolve(h, config={"grasp_types": str(p)}).synth_for(str(p)) for h in ("leap", "shadow"))
+    assert (lc.weights.penetration, lc.weights.distance, lc.iters) == (50.0, 7.0, 200)
+    assert (sc.weights.penetration, sc.iters) == (50.0, 200) and sc.weights.distance != 7.0
 
 
 def test_grasp_type_synth_is_a_layer_between_the_task_and_the_users_config(tmp_path):
