@@ -27,6 +27,7 @@ and hashes, and what ``datagen synth`` writes into its table's metadata.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -104,6 +105,10 @@ class Recipe(Config):
     #: settings differ from ``synth``: its YAML's ``synth:`` block less what the config and the
     #: flags set (`resolve`); a type not listed synthesizes with ``synth``
     grasp_type_synth: dict[str, Any] = field(default_factory=dict)
+    #: grasp type -> its ``init:`` fields for this hand (its ``hands`` entry over the type's), as
+    #: the synthesis applies them over the task's start: recorded so that a changed start is a
+    #: changed recipe (a resumed job refuses it); a type not listed starts as the task does
+    grasp_type_init: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.preset not in PRESETS:
@@ -163,6 +168,19 @@ def _grasp_type_layers(mix: GraspMix, below: list, above: list, synth: SynthConf
         diff = _differences(synth.to_dict(), {k: v for k, v in cfg.to_dict().items() if k != "grasp_type"})
         if diff:
             out[name] = diff
+    return out
+
+
+def _grasp_type_inits(mix: GraspMix, hand_name: str) -> dict[str, Any]:
+    """`Recipe.grasp_type_init`: the ``init:`` fields of each type of ``mix`` that has any, its
+    ``hands`` entry for ``hand_name`` over them (JSON values: lists for tuples)."""
+    from datagen.tasks.grasp_type import load_grasp_type
+
+    out: dict[str, Any] = {}
+    for name in mix.types():
+        init = dict(load_grasp_type(name).for_hand(hand_name).init)
+        if init:
+            out[name] = json.loads(json.dumps(init, sort_keys=True))
     return out
 
 
@@ -247,4 +265,5 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
                           "use scene tabletop with force-closure tasks (the six-direction test becomes the lift)")
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
                   grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
-                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, hand_name(hand)))
+                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, hand_name(hand)),
+                  grasp_type_init=_grasp_type_inits(mix, hand_name(hand)))

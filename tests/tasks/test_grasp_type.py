@@ -69,6 +69,24 @@ def test_a_hands_entry_goes_over_the_type_for_that_hand_only(tmp_path):
     assert (sc.weights.penetration, sc.iters) == (50.0, 200) and sc.weights.distance != 7.0
 
 
+def test_an_edited_types_start_is_another_recipe(tmp_path):
+    """A grasp type's ``init:`` (its hand's entry over it) is part of the recipe: editing the YAML's
+    start changes the recipe and its hash (job.json records the recipes; a shard whose resolution
+    differs from them stops: `workers.shard.same_recipes`)."""
+    from datagen.pipeline import resolve
+
+    p = tmp_path / "grip.yaml"
+    p.write_text("name: grip\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n"
+                 "hands:\n  leap: {init: {distance_m: [0.015, 0.04]}}\n")
+    cfg = {"grasp_types": str(p)}
+    leap, shadow = resolve("leap", config=cfg), resolve("shadow", config=cfg)
+    assert leap.grasp_type_init == {str(p): {"kind": "wrap", "distance_m": [0.015, 0.04]}}
+    assert shadow.grasp_type_init == {str(p): {"kind": "wrap", "distance_m": [0.03, 0.06]}}
+    assert resolve("shadow", config={"grasp_types": "precision"}).grasp_type_init == {}  # no init: block
+    p.write_text("name: grip\ninit: {kind: wrap, distance_m: [0.01, 0.02]}\n")
+    assert resolve("shadow", config=cfg).hash() != shadow.hash()
+
+
 def test_grasp_type_synth_is_a_layer_between_the_task_and_the_users_config(tmp_path):
     """A type's ``synth:`` block goes over the preset and the task (mappings key by key) for its
     grasps only; the user's config and flags win over it, even with a default's value; the
