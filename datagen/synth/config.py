@@ -61,6 +61,10 @@ class SynthConfig(Config):
     seeds_per_grasp: int = 1  #: multi-start: initial poses per output grasp; the best after seed_select_iter goes on
     seed_select_iter: int = 120  #: iterations every seed runs before the best seed of each grasp is kept
     seed_contact_gap_m: float = 0.002  #: seed choice: hand links within this of the surface count as contacts, m
+    #: seed choice: a seed with a collision sphere deeper than this in the object surface (beyond
+    #: the sphere margin) ranks below every seed without one, m (None: depth is not looked at; a
+    #: grasp type's setting)
+    seed_max_depth_m: float | None = None
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
@@ -94,6 +98,8 @@ class SynthConfig(Config):
             raise ConfigError(f"SynthConfig.self_pair_skin_m must be a finite number >= 0 m, got {self.self_pair_skin_m}")
         if not (math.isfinite(self.pinch_antipodal) and self.pinch_antipodal >= 0):
             raise ConfigError(f"SynthConfig.pinch_antipodal must be a finite number >= 0, got {self.pinch_antipodal}")
+        if self.seed_max_depth_m is not None and not (math.isfinite(self.seed_max_depth_m) and self.seed_max_depth_m > 0):
+            raise ConfigError(f"SynthConfig.seed_max_depth_m must be null or a finite number > 0 m, got {self.seed_max_depth_m}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")

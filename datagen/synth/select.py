@@ -13,6 +13,13 @@ energy is on (``weights.task > 0``), the seed whose whole-hand contacts resist t
 task epsilon (eq. 3, the smallest GWS radius over the TWS sector) of the same link contacts. With
 the task energy off (the paper's baseline) nothing task-specific is used, for force closure's
 sphere (the precision grasps) as for a sector: the lowest energy wins.
+
+With ``seed_max_depth_m`` (a grasp type's setting) a seed whose deepest collision sphere sinks
+further than that into the object's surface ranks below every seed that does not, whatever its
+epsilon: a fingertip pushed through a thin wall (a mug's, from the claw's start) reads contacts on
+both sides of it, scores the highest epsilon of its grasp's seeds, and stays there (E3M5's mug at
+0.08 m on a table: 7 of 16 seeds 13-14 mm deep after 120 iterations, two of them chosen, 13 mm
+deep at the end; benchmarks/results/tabletop.md).
 """
 
 from __future__ import annotations
@@ -23,7 +30,11 @@ from datagen.synth.energies import _query_targets, hand_object_state
 from datagen.wrench import epsilon_metric, task_epsilon
 from datagen.wrench.tws import task_wrench_at_contacts
 
-__all__ = ["best_seeds", "link_contacts", "link_epsilon", "seed_scores", "top_seeds"]
+__all__ = ["DEEP_PENALTY", "best_seeds", "link_contacts", "link_epsilon", "seed_scores", "top_seeds"]
+
+#: subtracted from the score of a seed deeper than ``seed_max_depth_m``: more than any epsilon
+#: (<= 2 x 1e3 here) or energy term can add, so it ranks below every seed that is not
+DEEP_PENALTY = 1e6
 
 
 def link_contacts(hand, targets, index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
@@ -76,7 +87,8 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
     """``(N,)`` how promising each pose is (higher is better): with the task energy on, the
     whole-hand epsilon of poses whose task fingertips are in contact -- force closure's (gamma 180
     deg), or the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by
-    the lower energy; with the task energy off: minus the energy. ``root (N, 7)``,
+    the lower energy; with the task energy off: minus the energy; with ``cfg.seed_max_depth_m``,
+    poses with a sphere deeper than that in the object lowered by `DEEP_PENALTY`. ``root (N, 7)``,
     ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target;
     ``task_origin`` ``(N, 3)``: where the task wrench acts (:func:`link_epsilon`)."""
     cfg = cfg.for_hand(hand)
@@ -97,6 +109,10 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
                     p[rows], n[rows], touching[rows], cfg.contact.mu, normalize=cfg.contact.normalize,
                     task=None if closure else (task.w_t, task.gamma_deg), task_origin=origin).to(energy.dtype))
             score = score + 1e3 * eps
+        if cfg.seed_max_depth_m is not None:
+            depth = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
+                                      sphere_margin=cfg.sphere_margin_m, self_collision=False).max_penetration
+            score = torch.where(depth > cfg.seed_max_depth_m, score - DEEP_PENALTY, score)
         return score
 
 

@@ -204,3 +204,34 @@ def test_row_parts_keep_every_targets_share(monkeypatch):
     assert len(synth_mod._row_parts(torch.tensor([0] * 10 + [1] * 6), [None] * 2, 2)) == 1  # unequal targets
     assert len(synth_mod._row_parts(torch.zeros(7, dtype=torch.long), [None], 2)) == 1  # 7 < 2 x 4
     assert [p.tolist() for p in synth_mod._row_parts(torch.zeros(8, dtype=torch.long), [None], 2)] == [[0, 1, 2, 3], [4, 5, 6, 7]]
+
+
+def test_seed_deeper_than_the_limit_ranks_below_every_other(hand, box):
+    """With seed_max_depth_m a pose whose deepest collision sphere sinks further than that into
+    the object (the box's exact signed distance, hand-computed from its half extents, less the
+    sphere's radius and margin) loses DEEP_PENALTY from its score, the others keep theirs; so a
+    deep seed with the higher epsilon loses to a shallow one."""
+    from datagen.synth.select import DEEP_PENALTY, seed_scores
+
+    task = load_task("force_closure")
+    res = synthesize(hand, [box], task, SynthConfig(iters=60, seed=2), 4)
+    root, joints = res.grasp[:, :7].clone(), res.grasp[:, 7:]
+    sunk = root.clone()
+    sunk[:, :3] *= 0.6  # the hand 40% of the way to the box's centre: fingers deep inside
+    root, joints = torch.cat([root, sunk]), torch.cat([joints, joints])
+    index = torch.zeros(8, dtype=torch.long)
+    energy = torch.zeros(8)
+    tips = contact_sphere_index(hand)
+    off = SynthConfig().for_hand(hand)
+    on = SynthConfig(seed_max_depth_m=0.005).for_hand(hand)
+    ext = torch.tensor([1.0, 0.7, 1.4], dtype=torch.float64)  # the fixture's box, centred at the origin
+    half = 0.5 * ext / (0.5 * ext).norm() * box.scale  # m
+    centres, radii = hand.spheres(root, joints)
+    q = centres.double().abs() - half  # (8, S, 3)
+    sdf = q.clamp_min(0).norm(dim=-1) + q.amax(-1).clamp_max(0)  # the box's exact signed distance
+    depth = (radii.double() - on.sphere_margin_m - sdf).amax(-1)
+    deep = depth > 0.005
+    assert deep[4:].all() and not deep[:4].any()  # the case is not vacuous, and the limit is not near a pose
+    assert (depth[:4] < 0.004).all() and (depth[4:] > 0.006).all()
+    want = seed_scores(hand, [box], index, root, joints, energy, tips, task, off) - DEEP_PENALTY * deep.float()
+    assert torch.allclose(seed_scores(hand, [box], index, root, joints, energy, tips, task, on), want)
