@@ -119,6 +119,7 @@ def _shadow_spec_dict():
     (lambda d: d["palm"].update(thumb=d["palm"]["approach"]), "orthogonal"),
     (lambda d: d.update(version=99), "version"),
     (lambda d: d["sphere_fit"].update(overshoot=0.5), "overshoot"),
+    (lambda d: d.update(thumb_finger="thumb"), "thumb_finger 'thumb' is not one of the fingertips"),
 ])
 def test_malformed_spec_names_the_file(tmp_path, mutate, needle):
     data = _shadow_spec_dict()
@@ -285,3 +286,56 @@ def test_thumb_axis_is_across_the_fingers_when_the_thumb_sits_at_the_wrist(tmp_p
     assert abs(float(t @ fingers)) < 1e-4 * np.linalg.norm(fingers)
     assert abs(float(t @ a)) < 1e-4
     assert float(t @ (pad("th") - origin)) > 0.01 and float(t @ base) > 0.01  # towards the thumb
+
+
+def test_the_derived_thumb_is_recorded_and_gives_the_pinch_axis(tmp_path):
+    """Fingers named after their links, no --thumb: `hand init` detects the thumb (the pad facing
+    the others) and records it, and the wrap / rim starts' pinch axis is that fingertip minus the
+    other two, as MuJoCo's kinematics places the pads. A spec without the key: "th" if a finger
+    has that name, else no thumb (no pinch axis)."""
+    from datagen.synth.init import _pinch_vector
+
+    urdf = write_toy_urdf(tmp_path)
+    text = urdf.read_text().replace("</robot>", THUMB_AT_WRIST + "</robot>")
+    urdf.write_text(text.replace('<origin xyz="0.05 0 -0.035"/><axis xyz="1 0 0"/>',  # the thumb faces the fingers
+                                 '<origin xyz="0.05 0 -0.035" rpy="0 0 3.14159"/><axis xyz="1 0 0"/>'))
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(urdf), "--name", "toy", "--root-body", "palm", "--out", str(out)]) == 0
+    spec = load_spec(out)
+    assert spec.thumb_finger == "th_tip" and "thumb_finger: th_tip" in out.read_text()
+    hand = load_hand(out, dtype=torch.float64)
+    model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+    data = mujoco.MjData(model)
+    data.qpos[:] = hand.joints_to_qpos(hand.open_pose)
+    mujoco.mj_kinematics(model, data)
+
+    def pad(name):
+        tip = spec.fingertips[name]
+        b = model.body(tip.link).id
+        return data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(tip.point)
+
+    want = pad("th_tip") - 0.5 * (pad("a_tip") + pad("b_tip"))
+    got = _pinch_vector(hand, hand.open_pose, None).numpy()
+    assert np.allclose(got, want, atol=1e-6)
+    data_no_key = yaml.safe_load(out.read_text())
+    data_no_key.pop("thumb_finger")
+    assert HandSpec.from_dict(data_no_key).thumb_finger is None
+    assert load_spec(builtin_spec_path("shadow")).thumb_finger == "th"
+    assert "thumb_finger" not in yaml.safe_load(builtin_spec_path("shadow").read_text())
+
+
+def test_pad_point_is_the_middle_of_a_flat_pad(tmp_path):
+    """A box fingertip 16 mm wide: the pad's contact point is on the pad face's centre line
+    (hand-computed: x = 0 in the link frame, the face at y = -6 mm), 70% along the link, and its
+    normal is the face's (0, -1, 0); the most padward sample alone lands anywhere on the face."""
+    write_toy_urdf(tmp_path)
+    box = trimesh.creation.box(extents=(0.016, 0.012, 0.03))
+    box.apply_translation([0, 0, 0.015])
+    box.export(tmp_path / "meshes" / "tip.stl")
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(tmp_path / "toy.urdf"), "--name", "toy", "--root-body", "palm", "--finger",
+                           "a_tip=index", "--finger", "b_tip=thumb", "--out", str(out)]) == 0
+    for tip in load_spec(out).fingertips.values():
+        x, y, z = tip.point
+        assert abs(x) < 0.001 and abs(y + 0.006) < 1e-4 and abs(z - 0.7 * 0.03) < 0.0025
+        assert np.allclose(tip.normal, (0, -1, 0), atol=1e-3)
