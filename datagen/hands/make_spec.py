@@ -98,6 +98,23 @@ def _pad_centre(pts: np.ndarray, pad: np.ndarray, facing: np.ndarray, depth_m: f
     return int(face[np.argmin(np.linalg.norm(pts[face] - centre, axis=1))])
 
 
+def _contact_sphere(spheres: np.ndarray, point: np.ndarray, normal: np.ndarray) -> int | None:
+    """Index of the sphere (rows ``[x, y, z, r]``, link frame) that carries a fingertip's contact
+    at ``point`` with outward ``normal``: of the spheres whose outermost point along the normal
+    reaches the pad's surface there, the one whose outermost point is nearest ``point`` across the
+    normal (the deepest-reaching one if none reaches). The sphere whose surface is merely nearest
+    the point can sit 9 mm along the finger from it (LEAP, 13 mm spheres overlapping on its flat
+    pads); None for a link without spheres."""
+    if not len(spheres):
+        return None
+    tip = spheres[:, :3] + spheres[:, 3:4] * normal  # (n, 3) each sphere's outermost point along the normal
+    d = tip - point
+    out = d @ normal  # how far beyond the pad's surface it reaches, m
+    across = np.linalg.norm(d - out[:, None] * normal, axis=1)
+    reach = out >= 0
+    return int(np.flatnonzero(reach)[np.argmin(across[reach])]) if reach.any() else int(np.argmax(out))
+
+
 def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contact point, its outward normal (link frame) and the pad direction (world) of a fingertip."""
     joint_body = next(a for a in _ancestors(model, body) if model.body_jntnum[a] > 0)
@@ -241,7 +258,9 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     fingertips, pads = {}, {}
     for b, fname in zip(tips, names):
         point, normal, pad = _pad_contact(model, data, b, rng)
-        fingertips[fname] = Fingertip(link=model.body(b).name, point=tuple(point), normal=tuple(normal))
+        link = model.body(b).name
+        fingertips[fname] = Fingertip(link=link, point=tuple(point), normal=tuple(normal),
+                                      sphere=_contact_sphere(spheres.get(link, np.zeros((0, 4))), point, normal))
         pads[fname] = pad
     if thumb is None:
         if len(pads) >= 3:

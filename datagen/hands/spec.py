@@ -103,6 +103,9 @@ class Fingertip:
     link: str
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
+    # the link's collision sphere that carries the contact (an index into `HandSpec.spheres[link]`);
+    # None: the sphere whose surface is nearest ``point`` (`datagen.synth.energies.contact_sphere_index`)
+    sphere: int | None = None
 
 
 @dataclass(frozen=True)
@@ -208,6 +211,11 @@ class HandSpec:
                     raise HandSpecError(p, f"sphere radius must be > 0 on link {link!r}, got {s[3]}")
         if not self.fingertips:
             raise HandSpecError(p, "no fingertips", "list at least one fingertip contact point")
+        for fname, tip in self.fingertips.items():
+            n = len(self.spheres.get(tip.link, ()))
+            if tip.sphere is not None and not 0 <= tip.sphere < n:
+                raise HandSpecError(p, f"fingertips.{fname}.sphere {tip.sphere} is out of range: link {tip.link!r} "
+                                    f"has {n} spheres", "give an index below that, or remove the key")
         for pr in self.self_collision_pairs:
             for link, idx in ((pr.link_a, pr.spheres_a), (pr.link_b, pr.spheres_b)):
                 n = len(self.spheres.get(link, ()))
@@ -268,6 +276,7 @@ class HandSpec:
                     link=str(tip["link"]),
                     point=_vec(tip["point"], 3, f"fingertips.{fname}.point", p),
                     normal=_unit(tip.get("normal"), f"fingertips.{fname}.normal", p),
+                    sphere=None if tip.get("sphere") is None else int(tip["sphere"]),
                 )
             palm_d = data["palm"]
             if not isinstance(palm_d, Mapping):
@@ -330,7 +339,8 @@ class HandSpec:
             "root_body": self.root_body,
             "palm": {"link": self.palm.link, "origin": r(self.palm.origin), "approach": r(self.palm.approach, 6),
                      "thumb": r(self.palm.thumb, 6)},
-            "fingertips": {k: {"link": t.link, "point": r(t.point), "normal": r(t.normal, 6)}
+            "fingertips": {k: {"link": t.link, "point": r(t.point), "normal": r(t.normal, 6),
+                               **({} if t.sphere is None else {"sphere": t.sphere})}
                            for k, t in self.fingertips.items()},
             "open_pose": {k: round(float(v), 6) for k, v in self.open_pose.items()},
             "couplings": [{"joint": c.joint, "leader": c.leader, "ratio": round(c.ratio, 6),

@@ -120,6 +120,7 @@ def _shadow_spec_dict():
     (lambda d: d.update(version=99), "version"),
     (lambda d: d["sphere_fit"].update(overshoot=0.5), "overshoot"),
     (lambda d: d.update(thumb_finger="thumb"), "thumb_finger 'thumb' is not one of the fingertips"),
+    (lambda d: d["fingertips"]["ff"].update(sphere=10_000), "fingertips.ff.sphere 10000 is out of range"),
 ])
 def test_malformed_spec_names_the_file(tmp_path, mutate, needle):
     data = _shadow_spec_dict()
@@ -335,7 +336,27 @@ def test_pad_point_is_the_middle_of_a_flat_pad(tmp_path):
     out = tmp_path / "toy.yaml"
     assert make_spec.main([str(tmp_path / "toy.urdf"), "--name", "toy", "--root-body", "palm", "--finger",
                            "a_tip=index", "--finger", "b_tip=thumb", "--out", str(out)]) == 0
-    for tip in load_spec(out).fingertips.values():
+    spec = load_spec(out)
+    hand = load_hand(out, dtype=torch.float64)
+    from datagen.synth.energies import contact_sphere_index
+    for f, (tip, i) in enumerate(zip(spec.fingertips.values(), contact_sphere_index(hand).tolist())):
         x, y, z = tip.point
         assert abs(x) < 0.001 and abs(y + 0.006) < 1e-4 and abs(z - 0.7 * 0.03) < 0.0025
         assert np.allclose(tip.normal, (0, -1, 0), atol=1e-3)
+        # the recorded contact sphere reaches the pad face within a millimetre across it of the point
+        c, r = hand.sphere_centres_local[i].numpy(), float(hand.sphere_radii[i])
+        assert i == hand.fingertip_spheres[f] and c[1] - r <= -0.006 and np.hypot(c[0] - x, c[2] - z) < 0.003
+
+
+def test_contact_sphere_is_the_one_reaching_the_pad_at_its_point():
+    """Hand-computed: a pad at y = -1 (outward normal -y), its point at the origin's foot (0, -1, 0).
+    Sphere 0 reaches y = -1.2 straight below the point; sphere 1 reaches further but 0.5 aside;
+    sphere 2's surface is nearest the point (0.05 away) but stops short of the pad (y = -0.95):
+    sphere 0 carries the contact, where the nearest-surface rule took sphere 2."""
+    spheres = np.array([[0, 0, 0, 1.2], [0.5, 0, 0, 1.5], [0, -0.6, 0, 0.35]])
+    point, normal = np.array([0, -1.0, 0]), np.array([0, -1.0, 0])
+    assert make_spec._contact_sphere(spheres, point, normal) == 0
+    assert make_spec._contact_sphere(spheres[2:], point, normal) == 0  # none reaches: the deepest-reaching
+    assert make_spec._contact_sphere(np.zeros((0, 4)), point, normal) is None
+    for name in BUILTIN_HANDS:  # the built-in specs name no sphere: the nearest-surface rule, their rows as before
+        assert all(t.sphere is None for t in load_spec(builtin_spec_path(name)).fingertips.values())
