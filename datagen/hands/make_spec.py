@@ -11,9 +11,11 @@
 
 What it proposes (a person reviews the YAML and the picture; regenerating overwrites the file):
 collision spheres per link from its collision geoms (`spheres.fit_link_spheres`); one contact point
-per finger on the pad of each fingertip link (leaf links with collision geometry); the palm frame
-(palm link = deepest common ancestor of the fingertips, approach = mean pad normal of the
-non-thumb fingers in the open pose, thumb axis towards the thumb's base); the open pose (zeros
+per finger on the pad of each fingertip link (leaf links with collision geometry), 70% along the
+link, in the middle of the pad's face (`_pad_centre`); the thumb (the finger whose pad faces the
+others', recorded as ``thumb_finger``); the palm frame (palm link = deepest common ancestor of the
+fingertips, approach = mean pad normal of the non-thumb fingers in the open pose, thumb axis
+across the fingers on the thumb's side); the open pose (zeros
 clipped to limits, couplings applied); tendon/equality joint couplings; self-collision link pairs
 (not parent/child, not overlapping in the open pose).
 """
@@ -37,6 +39,8 @@ from .spec import (AssetRef, Fingertip, HandSpec, HandSpecError, PalmFrame, Self
 from .spheres import fit_link_spheres
 
 __all__ = ["propose_spec", "main"]
+
+PAD_FACE_DEPTH_M = 0.001  # a fingertip's pad face: its surface within this of the most padward point
 
 
 def _ancestors(model: mujoco.MjModel, body: int) -> list[int]:
@@ -81,6 +85,36 @@ def _surface_normal(shapes, point: np.ndarray, approx: np.ndarray, h: float = 1e
     return n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-6 else approx
 
 
+def _pad_centre(pts: np.ndarray, pad: np.ndarray, facing: np.ndarray, depth_m: float = PAD_FACE_DEPTH_M) -> int:
+    """Index of the pad's contact point among the surface samples ``pts (N, 3)``: of the
+    ``facing`` ones, those within ``depth_m`` of the outermost along ``pad`` (the pad's face: a
+    flat pad's whole width, a rounded pad's cap), the one nearest their centroid. The outermost
+    sample alone is a random point of a flat face, up to its edge (LEAP's thumb: 7 of its 9.5 mm
+    half-width off the middle, the normal there 14 deg off the face's)."""
+    idx = np.flatnonzero(facing)
+    height = pts[idx] @ pad
+    face = idx[height >= height.max() - depth_m]
+    centre = pts[face].mean(axis=0)
+    return int(face[np.argmin(np.linalg.norm(pts[face] - centre, axis=1))])
+
+
+def _contact_sphere(spheres: np.ndarray, point: np.ndarray, normal: np.ndarray) -> int | None:
+    """Index of the sphere (rows ``[x, y, z, r]``, link frame) that carries a fingertip's contact
+    at ``point`` with outward ``normal``: of the spheres whose outermost point along the normal
+    reaches the pad's surface there, the one whose outermost point is nearest ``point`` across the
+    normal (the deepest-reaching one if none reaches). The sphere whose surface is merely nearest
+    the point can sit 9 mm along the finger from it (LEAP, 13 mm spheres overlapping on its flat
+    pads); None for a link without spheres."""
+    if not len(spheres):
+        return None
+    tip = spheres[:, :3] + spheres[:, 3:4] * normal  # (n, 3) each sphere's outermost point along the normal
+    d = tip - point
+    out = d @ normal  # how far beyond the pad's surface it reaches, m
+    across = np.linalg.norm(d - out[:, None] * normal, axis=1)
+    reach = out >= 0
+    return int(np.flatnonzero(reach)[np.argmin(across[reach])]) if reach.any() else int(np.argmax(out))
+
+
 def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contact point, its outward normal (link frame) and the pad direction (world) of a fingertip."""
     joint_body = next(a for a in _ancestors(model, body) if model.body_jntnum[a] > 0)
@@ -92,7 +126,8 @@ def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, n
     R, t = data.xmat[body].reshape(3, 3), data.xpos[body]
     anchor = R.T @ (data.xanchor[j] - t)  # joint anchor in the link frame
     axis = R.T @ data.xaxis[j]
-    tip = pts[np.argmax(np.linalg.norm(pts - anchor, axis=1))]
+    reach = np.linalg.norm(pts - anchor, axis=1)
+    tip = pts[reach >= np.percentile(reach, 99)].mean(axis=0)  # the far end (not one corner of a box's)
     pad = closing * np.cross(axis, tip - anchor)
     pad /= np.linalg.norm(pad)
     along = (tip - anchor) / np.linalg.norm(tip - anchor)
@@ -102,7 +137,7 @@ def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, n
     facing = near & (nrm @ pad >= 0.5)
     if not facing.any():
         facing = nrm @ pad >= 0.5
-    best = np.flatnonzero(facing)[np.argmax((pts @ pad)[facing])]  # the most padward point there
+    best = _pad_centre(pts, pad, facing)
     normal = _surface_normal(shapes, pts[best], nrm[best])
     if not points_outward(shapes, pts[best], normal):  # at a box's or hull's edge: the sampled face's normal
         normal = nrm[best] / np.linalg.norm(nrm[best])
@@ -223,7 +258,9 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     fingertips, pads = {}, {}
     for b, fname in zip(tips, names):
         point, normal, pad = _pad_contact(model, data, b, rng)
-        fingertips[fname] = Fingertip(link=model.body(b).name, point=tuple(point), normal=tuple(normal))
+        link = model.body(b).name
+        fingertips[fname] = Fingertip(link=link, point=tuple(point), normal=tuple(normal),
+                                      sphere=_contact_sphere(spheres.get(link, np.zeros((0, 4))), point, normal))
         pads[fname] = pad
     if thumb is None:
         if len(pads) >= 3:
@@ -266,7 +303,7 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
                        thumb=tuple(thumb_axis)),
         open_pose={model.joint(j).name: float(q_open[j]) for j in range(model.njnt)},
         couplings=tuple(couplings), self_collision_pairs=tuple(pairs), sphere_fit=fit,
-        position_actuator_kp=position_kp,
+        position_actuator_kp=position_kp, thumb_finger=thumb,
     )
     return spec, flat
 

@@ -101,6 +101,9 @@ class HandModel:
             sa = [first[ia] + i for i in (pr.spheres_a or range(na))]
             sb = [first[ib] + i for i in (pr.spheres_b or range(nb))]
             pairs += [(x, y) for x in sa for y in sb]
+        # each fingertip's contact sphere (index into the spheres) where the spec names one, else None
+        self.fingertip_spheres: list[int | None] = [
+            None if t.sphere is None else first[need_link(t.link, "fingertips")] + t.sphere for t in tips]
         self.self_collision_link_pairs: list[tuple[str, str]] = [(p.link_a, p.link_b)
                                                                   for p in spec.self_collision_pairs]
         self.actuator_names: list[str] = [m.actuator(u).name for u in range(m.nu)]

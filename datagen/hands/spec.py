@@ -103,6 +103,9 @@ class Fingertip:
     link: str
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
+    # the link's collision sphere that carries the contact (an index into `HandSpec.spheres[link]`);
+    # None: the sphere whose surface is nearest ``point`` (`datagen.synth.energies.contact_sphere_index`)
+    sphere: int | None = None
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,10 @@ class HandSpec:
     # one (792) penetrates 1.2 mm at p90 in MuJoCo with that, 0.03 mm with 0.5 mm, at the same
     # success (benchmarks/results/quality.md). SynthConfig.sphere_margin_m overrides it.
     sphere_margin_m: float = 0.0015
+    # The finger that opposes the others (one of `fingertips`; None: the hand has none): a wrap or
+    # rim start turns the thumb-to-fingers axis across the object (`datagen.synth.init`). A spec
+    # without the key: "th" when it names a finger so, else None.
+    thumb_finger: str | None = None
     source_file: str | None = None  # the YAML this spec was read from, for error messages
 
     def __post_init__(self) -> None:
@@ -204,12 +211,20 @@ class HandSpec:
                     raise HandSpecError(p, f"sphere radius must be > 0 on link {link!r}, got {s[3]}")
         if not self.fingertips:
             raise HandSpecError(p, "no fingertips", "list at least one fingertip contact point")
+        for fname, tip in self.fingertips.items():
+            n = len(self.spheres.get(tip.link, ()))
+            if tip.sphere is not None and not 0 <= tip.sphere < n:
+                raise HandSpecError(p, f"fingertips.{fname}.sphere {tip.sphere} is out of range: link {tip.link!r} "
+                                    f"has {n} spheres", "give an index below that, or remove the key")
         for pr in self.self_collision_pairs:
             for link, idx in ((pr.link_a, pr.spheres_a), (pr.link_b, pr.spheres_b)):
                 n = len(self.spheres.get(link, ()))
                 if n == 0 or any(not 0 <= i < n for i in idx):
                     raise HandSpecError(p, f"self_collision_pairs: link {link!r} has {n} spheres, "
                                         f"sphere indices {list(idx)[:5]}... are out of range")
+        if self.thumb_finger is not None and self.thumb_finger not in self.fingertips:
+            raise HandSpecError(p, f"thumb_finger {self.thumb_finger!r} is not one of the fingertips "
+                                f"{list(self.fingertips)}", "name one of them, or remove the key for a hand without a thumb")
         if self.position_actuator_kp <= 0:
             raise HandSpecError(p, "position_actuator_kp must be > 0")
         if not 0 <= self.sphere_margin_m < 0.01:
@@ -226,7 +241,7 @@ class HandSpec:
         if version != SPEC_VERSION:
             raise HandSpecError(p, f"spec version {version!r} is not supported (expected {SPEC_VERSION})")
         known = {"version", "name", "mjcf", "root_body", "spheres", "fingertips", "palm", "open_pose",
-                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp", "sphere_margin_m"}
+                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp", "sphere_margin_m", "thumb_finger"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise HandSpecError(p, f"unknown keys {unknown}", f"allowed keys: {sorted(known)}")
@@ -261,6 +276,7 @@ class HandSpec:
                     link=str(tip["link"]),
                     point=_vec(tip["point"], 3, f"fingertips.{fname}.point", p),
                     normal=_unit(tip.get("normal"), f"fingertips.{fname}.normal", p),
+                    sphere=None if tip.get("sphere") is None else int(tip["sphere"]),
                 )
             palm_d = data["palm"]
             if not isinstance(palm_d, Mapping):
@@ -295,7 +311,8 @@ class HandSpec:
                 fingertips=tips, palm=palm, open_pose=open_pose, couplings=couplings,
                 self_collision_pairs=tuple(pairs), sphere_fit=fit,
                 position_actuator_kp=float(data.get("position_actuator_kp", 5.0)),
-                sphere_margin_m=float(data.get("sphere_margin_m", 0.0015)), source_file=p,
+                sphere_margin_m=float(data.get("sphere_margin_m", 0.0015)),
+                thumb_finger=_thumb_finger(data, tips), source_file=p,
             )
         except HandSpecError as exc:
             if exc.path is None and p is not None:
@@ -322,11 +339,13 @@ class HandSpec:
             "root_body": self.root_body,
             "palm": {"link": self.palm.link, "origin": r(self.palm.origin), "approach": r(self.palm.approach, 6),
                      "thumb": r(self.palm.thumb, 6)},
-            "fingertips": {k: {"link": t.link, "point": r(t.point), "normal": r(t.normal, 6)}
+            "fingertips": {k: {"link": t.link, "point": r(t.point), "normal": r(t.normal, 6),
+                               **({} if t.sphere is None else {"sphere": t.sphere})}
                            for k, t in self.fingertips.items()},
             "open_pose": {k: round(float(v), 6) for k, v in self.open_pose.items()},
             "couplings": [{"joint": c.joint, "leader": c.leader, "ratio": round(c.ratio, 6),
                            "offset": round(c.offset, 6)} for c in self.couplings],
+            **({"thumb_finger": self.thumb_finger} if self.thumb_finger != default_thumb(self.fingertips) else {}),
             "position_actuator_kp": self.position_actuator_kp,
             "sphere_margin_m": self.sphere_margin_m,
             "sphere_fit": {"overshoot": self.sphere_fit.overshoot, "coverage": self.sphere_fit.coverage,
@@ -337,6 +356,18 @@ class HandSpec:
                 for pr in self.self_collision_pairs],
             "spheres": {k: [r(s) for s in v] for k, v in self.spheres.items()},
         }
+
+
+def default_thumb(fingertips: Mapping[str, Any]) -> str | None:
+    """The thumb of a spec that does not name one: the finger called "th", if any."""
+    return "th" if "th" in fingertips else None
+
+
+def _thumb_finger(data: Mapping[str, Any], tips: Mapping[str, Any]) -> str | None:
+    if "thumb_finger" not in data:
+        return default_thumb(tips)
+    value = data["thumb_finger"]
+    return None if value is None else str(value)
 
 
 class _FlowListDumper(yaml.SafeDumper):

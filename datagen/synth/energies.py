@@ -103,9 +103,13 @@ def _query_targets(targets, object_index: torch.Tensor, points: torch.Tensor, ex
 
 
 def contact_sphere_index(hand) -> torch.Tensor:
-    """(F,) index of each fingertip's contact sphere: its link's sphere nearest the pad point."""
+    """(F,) index of each fingertip's contact sphere: the one its spec names (`Fingertip.sphere`),
+    else its link's sphere whose surface is nearest the pad point."""
     out = []
     for f, link in enumerate(hand.fingertip_link_index.tolist()):
+        if hand.fingertip_spheres[f] is not None:
+            out.append(torch.tensor(hand.fingertip_spheres[f], device=hand.sphere_link_index.device))
+            continue
         cand = (hand.sphere_link_index == link).nonzero().squeeze(-1)
         if cand.numel() == 0:
             raise ValueError(f"hand {hand.name!r}: fingertip {hand.fingertip_names[f]!r} has no collision sphere on its link")

@@ -133,14 +133,14 @@ def fingertip_centre(hand, root: torch.Tensor, joints: torch.Tensor, tip_index) 
 
 def _pinch_vector(hand, joints: torch.Tensor, tip_index) -> torch.Tensor | None:
     """(3,) thumb tip minus the mean of the other task tips, root frame, at ``joints`` (J,);
-    None without a thumb and another finger among the task's tips."""
-    names = hand.fingertip_names
+    None without a thumb (the spec's ``thumb_finger``) and another finger among the task's tips."""
+    names, thumb = hand.fingertip_names, hand.spec.thumb_finger
     tips = list(range(len(names))) if tip_index is None else list(tip_index)
-    if "th" not in names or names.index("th") not in tips or len(tips) < 2:
+    if thumb is None or names.index(thumb) not in tips or len(tips) < 2:
         return None
     ident = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
     pts = hand.fingertip_points(ident, joints)
-    th = names.index("th")
+    th = names.index(thumb)
     return pts[th] - pts[[i for i in tips if i != th]].mean(0)
 
 

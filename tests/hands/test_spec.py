@@ -119,6 +119,8 @@ def _shadow_spec_dict():
     (lambda d: d["palm"].update(thumb=d["palm"]["approach"]), "orthogonal"),
     (lambda d: d.update(version=99), "version"),
     (lambda d: d["sphere_fit"].update(overshoot=0.5), "overshoot"),
+    (lambda d: d.update(thumb_finger="thumb"), "thumb_finger 'thumb' is not one of the fingertips"),
+    (lambda d: d["fingertips"]["ff"].update(sphere=10_000), "fingertips.ff.sphere 10000 is out of range"),
 ])
 def test_malformed_spec_names_the_file(tmp_path, mutate, needle):
     data = _shadow_spec_dict()
@@ -285,3 +287,76 @@ def test_thumb_axis_is_across_the_fingers_when_the_thumb_sits_at_the_wrist(tmp_p
     assert abs(float(t @ fingers)) < 1e-4 * np.linalg.norm(fingers)
     assert abs(float(t @ a)) < 1e-4
     assert float(t @ (pad("th") - origin)) > 0.01 and float(t @ base) > 0.01  # towards the thumb
+
+
+def test_the_derived_thumb_is_recorded_and_gives_the_pinch_axis(tmp_path):
+    """Fingers named after their links, no --thumb: `hand init` detects the thumb (the pad facing
+    the others) and records it, and the wrap / rim starts' pinch axis is that fingertip minus the
+    other two, as MuJoCo's kinematics places the pads. A spec without the key: "th" if a finger
+    has that name, else no thumb (no pinch axis)."""
+    from datagen.synth.init import _pinch_vector
+
+    urdf = write_toy_urdf(tmp_path)
+    text = urdf.read_text().replace("</robot>", THUMB_AT_WRIST + "</robot>")
+    urdf.write_text(text.replace('<origin xyz="0.05 0 -0.035"/><axis xyz="1 0 0"/>',  # the thumb faces the fingers
+                                 '<origin xyz="0.05 0 -0.035" rpy="0 0 3.14159"/><axis xyz="1 0 0"/>'))
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(urdf), "--name", "toy", "--root-body", "palm", "--out", str(out)]) == 0
+    spec = load_spec(out)
+    assert spec.thumb_finger == "th_tip" and "thumb_finger: th_tip" in out.read_text()
+    hand = load_hand(out, dtype=torch.float64)
+    model = mujoco.MjModel.from_xml_path(str(hand.mjcf_path))
+    data = mujoco.MjData(model)
+    data.qpos[:] = hand.joints_to_qpos(hand.open_pose)
+    mujoco.mj_kinematics(model, data)
+
+    def pad(name):
+        tip = spec.fingertips[name]
+        b = model.body(tip.link).id
+        return data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(tip.point)
+
+    want = pad("th_tip") - 0.5 * (pad("a_tip") + pad("b_tip"))
+    got = _pinch_vector(hand, hand.open_pose, None).numpy()
+    assert np.allclose(got, want, atol=1e-6)
+    data_no_key = yaml.safe_load(out.read_text())
+    data_no_key.pop("thumb_finger")
+    assert HandSpec.from_dict(data_no_key).thumb_finger is None
+    assert load_spec(builtin_spec_path("shadow")).thumb_finger == "th"
+    assert "thumb_finger" not in yaml.safe_load(builtin_spec_path("shadow").read_text())
+
+
+def test_pad_point_is_the_middle_of_a_flat_pad(tmp_path):
+    """A box fingertip 16 mm wide: the pad's contact point is on the pad face's centre line
+    (hand-computed: x = 0 in the link frame, the face at y = -6 mm), 70% along the link, and its
+    normal is the face's (0, -1, 0); the most padward sample alone lands anywhere on the face."""
+    write_toy_urdf(tmp_path)
+    box = trimesh.creation.box(extents=(0.016, 0.012, 0.03))
+    box.apply_translation([0, 0, 0.015])
+    box.export(tmp_path / "meshes" / "tip.stl")
+    out = tmp_path / "toy.yaml"
+    assert make_spec.main([str(tmp_path / "toy.urdf"), "--name", "toy", "--root-body", "palm", "--finger",
+                           "a_tip=index", "--finger", "b_tip=thumb", "--out", str(out)]) == 0
+    spec = load_spec(out)
+    hand = load_hand(out, dtype=torch.float64)
+    from datagen.synth.energies import contact_sphere_index
+    for f, (tip, i) in enumerate(zip(spec.fingertips.values(), contact_sphere_index(hand).tolist())):
+        x, y, z = tip.point
+        assert abs(x) < 0.001 and abs(y + 0.006) < 1e-4 and abs(z - 0.7 * 0.03) < 0.0025
+        assert np.allclose(tip.normal, (0, -1, 0), atol=1e-3)
+        # the recorded contact sphere reaches the pad face within a millimetre across it of the point
+        c, r = hand.sphere_centres_local[i].numpy(), float(hand.sphere_radii[i])
+        assert i == hand.fingertip_spheres[f] and c[1] - r <= -0.006 and np.hypot(c[0] - x, c[2] - z) < 0.003
+
+
+def test_contact_sphere_is_the_one_reaching_the_pad_at_its_point():
+    """Hand-computed: a pad at y = -1 (outward normal -y), its point at the origin's foot (0, -1, 0).
+    Sphere 0 reaches y = -1.2 straight below the point; sphere 1 reaches further but 0.5 aside;
+    sphere 2's surface is nearest the point (0.05 away) but stops short of the pad (y = -0.95):
+    sphere 0 carries the contact, where the nearest-surface rule took sphere 2."""
+    spheres = np.array([[0, 0, 0, 1.2], [0.5, 0, 0, 1.5], [0, -0.6, 0, 0.35]])
+    point, normal = np.array([0, -1.0, 0]), np.array([0, -1.0, 0])
+    assert make_spec._contact_sphere(spheres, point, normal) == 0
+    assert make_spec._contact_sphere(spheres[2:], point, normal) == 0  # none reaches: the deepest-reaching
+    assert make_spec._contact_sphere(np.zeros((0, 4)), point, normal) is None
+    for name in BUILTIN_HANDS:  # the built-in specs name no sphere: the nearest-surface rule, their rows as before
+        assert all(t.sphere is None for t in load_spec(builtin_spec_path(name)).fingertips.values())
