@@ -109,9 +109,14 @@ def open_dataset(job_dir: str | Path) -> "pyarrow.dataset.Dataset":  # noqa: F82
 def read_job(job_dir: str | Path, columns: list[str] | None = None, only_success: bool = False) -> pa.Table:
     """The job's rows as one table (``object_path`` stays relative to ``job_dir``). Every shard
     is checked against the ledger and read with its page checksums verified: a damaged one
-    raises `ShardError` naming the file (a rerun of the job redoes it)."""
+    raises `ShardError` naming the file (a rerun of the job redoes it); a column the schema does
+    not have raises ValueError naming it."""
     flt = pc.field("success") == True if only_success else None  # noqa: E712 - an Arrow expression
     dataset = open_dataset(job_dir)
+    unknown = [c for c in columns or () if c not in dataset.schema.names]
+    if unknown:
+        raise ValueError(f"read_job: no column {', '.join(map(repr, unknown))} in {job_dir}'s rows "
+                         f"(schema `evaluated`: schemas/; e.g. {', '.join(dataset.schema.names[:6])}, ...)")
     parts = []
     for frag in dataset.get_fragments():
         try:

@@ -42,6 +42,15 @@ def test_read_job_matches_the_files(job_dir, raw):
     assert {r["split"] for r in raw} == {"train", "test"}
 
 
+def test_an_unknown_column_is_named_not_a_damaged_shard(job_dir):
+    """A column the schema lacks is the caller's mistake: one line naming it, not ShardError's
+    'damaged, rerun the job'."""
+    assert read_job(job_dir, columns=["object_scale_m"]).column_names == ["object_scale_m"]
+    with pytest.raises(ValueError, match=r"no column 'scale' in .*object_id") as exc:
+        read_job(job_dir, columns=["object_scale_m", "scale"])
+    assert "damaged" not in str(exc.value)
+
+
 def test_unfinished_shards_are_not_read(job_dir, tmp_path):
     import shutil
 
