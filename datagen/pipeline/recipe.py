@@ -27,6 +27,7 @@ and hashes, and what ``datagen synth`` writes into its table's metadata.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -105,10 +106,11 @@ class Recipe(Config):
     #: settings differ from ``synth``: its YAML's ``synth:`` block less what the config and the
     #: flags set (`resolve`); a type not listed synthesizes with ``synth``
     grasp_type_synth: dict[str, Any] = field(default_factory=dict)
-    #: grasp type -> its ``init:`` fields for this hand (its ``hands`` entry over the type's), as
-    #: the synthesis applies them over the task's start: recorded so that a changed start is a
-    #: changed recipe (a resumed job refuses it); a type not listed starts as the task does
-    grasp_type_init: dict[str, Any] = field(default_factory=dict)
+    #: the sha256 (16 hex digits) of what the task and each grasp type of ``grasp_types`` define
+    #: for this hand (the YAML as loaded, its ``hands`` entry applied: fingers, starts, contacts,
+    #: ``synth:`` blocks), keyed ``task`` and ``grasp_type <name>``: an edited task or type YAML is
+    #: another recipe, so a resumed job refuses it (`workers.shard.same_recipes`)
+    definitions: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.preset not in PRESETS:
@@ -171,16 +173,17 @@ def _grasp_type_layers(mix: GraspMix, below: list, above: list, synth: SynthConf
     return out
 
 
-def _grasp_type_inits(mix: GraspMix, hand_name: str) -> dict[str, Any]:
-    """`Recipe.grasp_type_init`: the ``init:`` fields of each type of ``mix`` that has any, its
-    ``hands`` entry for ``hand_name`` over them (JSON values: lists for tuples)."""
+def _definitions(spec, mix: GraspMix, hand_name: str) -> dict[str, str]:
+    """`Recipe.definitions`: the digests of the task ``spec`` and of each type of ``mix`` as hand
+    ``hand_name`` gets them."""
     from datagen.tasks.grasp_type import load_grasp_type
 
-    out: dict[str, Any] = {}
+    def digest(cfg) -> str:
+        return hashlib.sha256(json.dumps(cfg.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    out = {"task": digest(spec.for_hand(hand_name))}
     for name in mix.types():
-        init = dict(load_grasp_type(name).for_hand(hand_name).init)
-        if init:
-            out[name] = json.loads(json.dumps(init, sort_keys=True))
+        out[f"grasp_type {name}"] = digest(load_grasp_type(name).for_hand(hand_name))
     return out
 
 
@@ -266,4 +269,4 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
                   grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
                   scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, hand_name(hand)),
-                  grasp_type_init=_grasp_type_inits(mix, hand_name(hand)))
+                  definitions=_definitions(spec, mix, hand_name(hand)))

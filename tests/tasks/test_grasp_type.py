@@ -69,22 +69,33 @@ def test_a_hands_entry_goes_over_the_type_for_that_hand_only(tmp_path):
     assert (sc.weights.penetration, sc.iters) == (50.0, 200) and sc.weights.distance != 7.0
 
 
-def test_an_edited_types_start_is_another_recipe(tmp_path):
-    """A grasp type's ``init:`` (its hand's entry over it) is part of the recipe: editing the YAML's
-    start changes the recipe and its hash (job.json records the recipes; a shard whose resolution
-    differs from them stops: `workers.shard.same_recipes`)."""
+def test_an_edited_task_or_type_yaml_is_another_recipe(tmp_path):
+    """What a task or grasp type YAML defines for a hand is part of its recipe
+    (`Recipe.definitions`): editing the type's start, its contacts or the task's fingers changes
+    the recipe's hash (job.json records the recipes; a shard whose resolution differs from them
+    stops: `workers.shard.same_recipes`); another hand's entry leaves this hand's recipe alone."""
     from datagen.pipeline import resolve
 
-    p = tmp_path / "grip.yaml"
-    p.write_text("name: grip\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n"
+    t, task = tmp_path / "grip.yaml", tmp_path / "pinch.yaml"
+    t.write_text("name: grip\ncontacts: {palm: pull}\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n")
+    task.write_text("name: pinch\nfingers: [th, ff]\n")
+    cfg = {"grasp_types": str(t)}
+
+    def h(hand="shadow"):
+        return resolve(hand, task=str(task), config=cfg).hash()
+
+    before, leap = h(), h("leap")
+    t.write_text("name: grip\ncontacts: {palm: pull}\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n"
                  "hands:\n  leap: {init: {distance_m: [0.015, 0.04]}}\n")
-    cfg = {"grasp_types": str(p)}
-    leap, shadow = resolve("leap", config=cfg), resolve("shadow", config=cfg)
-    assert leap.grasp_type_init == {str(p): {"kind": "wrap", "distance_m": [0.015, 0.04]}}
-    assert shadow.grasp_type_init == {str(p): {"kind": "wrap", "distance_m": [0.03, 0.06]}}
-    assert resolve("shadow", config={"grasp_types": "precision"}).grasp_type_init == {}  # no init: block
-    p.write_text("name: grip\ninit: {kind: wrap, distance_m: [0.01, 0.02]}\n")
-    assert resolve("shadow", config=cfg).hash() != shadow.hash()
+    assert h() == before and h("leap") != leap  # LEAP's entry: LEAP's recipe only
+    for text in ("name: grip\ncontacts: {palm: pull}\ninit: {kind: wrap, distance_m: [0.01, 0.02]}\n",
+                 "name: grip\ncontacts: {palm: candidate}\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n"):
+        t.write_text(text)
+        assert h() != before
+    t.write_text("name: grip\ncontacts: {palm: pull}\ninit: {kind: wrap, distance_m: [0.03, 0.06]}\n")
+    assert h() == before
+    task.write_text("name: pinch\nfingers: [th, ff, mf]\n")
+    assert h() != before
 
 
 def test_grasp_type_synth_is_a_layer_between_the_task_and_the_users_config(tmp_path):
