@@ -31,7 +31,7 @@ import yaml
 from datagen import _bounded
 from datagen.errors import ConfigError
 
-__all__ = ["Config", "check_types", "from_mapping", "read_yaml", "stable_hash", "to_plain"]
+__all__ = ["Config", "check_types", "from_mapping", "merge_layers", "read_yaml", "stable_hash", "to_plain"]
 
 C = TypeVar("C", bound="Config")
 
@@ -257,3 +257,15 @@ def _coerce_scalar(tp: type, v: Any, bad) -> Any:
     if not ok:
         raise bad()
     return v
+
+
+def merge_layers(*layers: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The layers merged in order, later keys winning; nested mappings merge key by key."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for k, v in dict(layer or {}).items():
+            if isinstance(v, Mapping) and isinstance(out.get(k), dict):
+                out[k] = merge_layers(out[k], v)
+            else:
+                out[k] = merge_layers(v) if isinstance(v, Mapping) else v
+    return out

@@ -27,13 +27,11 @@ and hashes, and what ``datagen synth`` writes into its table's metadata.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from datagen.config import Config
+from datagen.config import Config, merge_layers, stable_hash
 from datagen.errors import ConfigError
 from datagen.eval.config import EvalConfig
 from datagen.objects.config import ProcessConfig
@@ -61,8 +59,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     # the real development objects 44% -> 69% at 0.10 m and 25% -> 44% at 0.12 m, held out
     # 20% -> 50% at 0.12 m, the other hands unchanged (issue 41, benchmarks/results/quality.md).
     # The fingertip grasps at 0.06-0.08 m are unchanged. The power type starts pre-curled and
-    # keeps out of the convex pieces (issue 41's third round): Shadow 58% / 36% -> 78% / 36%, held out 55% / 45% -> 70% / 55%, E3M5
-    # 42% / 33% -> 67% / 50%, successes' penetration p90 <= 0.6 mm (benchmarks/results/sizes.md);
+    # keeps out of the convex pieces (issue 41's third round): Shadow 58% / 36% -> 78% / 36%,
+    # held out 55% / 45% -> 70% / 55%, E3M5 42% / 33% -> 67% / 50%, successes' penetration p90
+    # <= 0.6 mm (benchmarks/results/sizes.md);
     # its starts face the object across its longest axis (fourth round, `init.kind: wrap`): E3M5
     # 54% / 46% -> 83% / 71%, Shadow 78% / 39% -> 69% / 53%, LEAP 92% / 75% -> 83% / 67%. With
     # those starts power grasps hold bigger objects too: at 0.15 m 66 of 112 rows over the four
@@ -178,24 +177,9 @@ def _definitions(spec, mix: GraspMix, hand_name: str) -> dict[str, str]:
     ``hand_name`` gets them."""
     from datagen.tasks.grasp_type import load_grasp_type
 
-    def digest(cfg) -> str:
-        return hashlib.sha256(json.dumps(cfg.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-    out = {"task": digest(spec.for_hand(hand_name))}
+    out = {"task": stable_hash(spec.for_hand(hand_name).to_dict())[:16]}
     for name in mix.types():
-        out[f"grasp_type {name}"] = digest(load_grasp_type(name).for_hand(hand_name))
-    return out
-
-
-def merge_layers(*layers: Mapping[str, Any] | None) -> dict[str, Any]:
-    """The layers merged in order, later keys winning; nested mappings merge key by key."""
-    out: dict[str, Any] = {}
-    for layer in layers:
-        for k, v in dict(layer or {}).items():
-            if isinstance(v, Mapping) and isinstance(out.get(k), dict):
-                out[k] = merge_layers(out[k], v)
-            else:
-                out[k] = merge_layers(v) if isinstance(v, Mapping) else v
+        out[f"grasp_type {name}"] = stable_hash(load_grasp_type(name).for_hand(hand_name).to_dict())[:16]
     return out
 
 
@@ -266,7 +250,8 @@ def resolve(hand: str = "shadow", task: str | Path = "force_closure", *, preset:
     if scene.tabletop and spec.eval != "six_direction":
         raise ConfigError(f"{where}: scene tabletop: task {spec.name!r} has its own test (eval block), which has no table",
                           "use scene tabletop with force-closure tasks (the six-direction test becomes the lift)")
+    who = hand_name(hand)
     return Recipe(hand=str(hand), task=str(task), preset=name, synth=synth, eval=ev, process=process,
                   grid_resolution=int(merged.get("grid_resolution", Recipe.grid_resolution)), grasp_types=mix,
-                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, hand_name(hand)),
-                  definitions=_definitions(spec, mix, hand_name(hand)))
+                  scene=scene, grasp_type_synth=_grasp_type_layers(mix, below, above, synth, extra, where, who),
+                  definitions=_definitions(spec, mix, who))

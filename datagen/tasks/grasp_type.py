@@ -17,7 +17,8 @@ own (`GraspType.for_hand`; the recipe of that hand records the synth layer it gi
 
     hands:
       leap: {init: {distance_m: [0.015, 0.04]}}
- ``precision`` is the fingertip grasp of the paper (no extra contacts);
+
+``precision`` is the fingertip grasp of the paper (no extra contacts);
 ``power`` adds the palm and the phalanges.
 
 Which type a grasp gets is the recipe's ``grasp_types`` (a `GraspMix`: per object size, a share
@@ -33,7 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from datagen.config import Config
+from datagen.config import Config, merge_layers
 from datagen.errors import ConfigError
 from datagen.tasks.spec import builtin_names, builtin_or_file
 
@@ -57,14 +58,6 @@ def _check_fields(where: str, init: Mapping[str, Any], synth: Mapping[str, Any])
     fixed = sorted(set(synth) & set(FIXED_SYNTH))
     if fixed:  # (unknown fields and bad values: refused by the recipe's resolution, naming the type)
         raise ConfigError(f"{where}: synth.{fixed[0]} is set by the job, not by a grasp type")
-
-
-def _merged(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
-    """``b`` over ``a``, nested mappings merged key by key."""
-    out = dict(a)
-    for k, v in dict(b).items():
-        out[k] = _merged(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
-    return out
 
 
 @dataclass(frozen=True)
@@ -127,7 +120,7 @@ class GraspType(Config):
         o = self.hands.get(hand_name)
         if o is None:
             return self if not self.hands else replace(self, hands={})
-        return replace(self, init={**dict(self.init), **dict(o.init)}, synth=_merged(self.synth, o.synth), hands={})
+        return replace(self, init={**dict(self.init), **dict(o.init)}, synth=merge_layers(self.synth, o.synth), hands={})
 
     def role(self, name: str) -> str | None:
         """``"pull"``, ``"candidate"`` or None (the role takes no part)."""
