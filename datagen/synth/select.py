@@ -95,9 +95,12 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
         closure = task.gamma_deg >= 180
-        if cfg.weights.task > 0 and tip_spheres.numel() >= (2 if closure else 1):
+        scored = cfg.weights.task > 0 and tip_spheres.numel() >= (2 if closure else 1)
+        tips = None
+        if scored or cfg.seed_max_depth_m is not None:  # one hand-object state for both uses
             tips = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
                                      sphere_margin=cfg.sphere_margin_m, self_collision=False)
+        if scored:
             usable = tips.tip_distance.abs().amax(-1) <= cfg.contact_threshold_m
             p, n, touching = link_contacts(hand, targets, seed_index, root, joints, cfg.seed_contact_gap_m)
             # the epsilon of the usable poses only (the others' is not used): per pose, so the same values
@@ -110,9 +113,7 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
                     task=None if closure else (task.w_t, task.gamma_deg), task_origin=origin).to(energy.dtype))
             score = score + 1e3 * eps
         if cfg.seed_max_depth_m is not None:
-            depth = hand_object_state(hand, targets, seed_index, root, joints, tip_spheres,
-                                      sphere_margin=cfg.sphere_margin_m, self_collision=False).max_penetration
-            score = torch.where(depth > cfg.seed_max_depth_m, score - DEEP_PENALTY, score)
+            score = torch.where(tips.max_penetration > cfg.seed_max_depth_m, score - DEEP_PENALTY, score)
         return score
 
 
