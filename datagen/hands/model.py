@@ -52,38 +52,14 @@ class HandModel:
         self.link_names: list[str] = [m.body(b).name for b in range(1, m.nbody)]
         if any(not n for n in self.link_names + self.joint_names) or len(set(self.link_names)) != len(self.link_names):
             raise HandSpecError(where, "every hand body and joint needs a unique name", "name them in the MJCF")
-        link_index = {n: i for i, n in enumerate(self.link_names)}
-        joint_index = {n: i for i, n in enumerate(self.joint_names)}
-
-        def need_link(name: str, what: str) -> int:
-            if name not in link_index:
-                raise HandSpecError(where, f"{what} names unknown link {name!r}", f"links: {self.link_names}")
-            return link_index[name]
-
-        def need_joint(name: str, what: str) -> int:
-            if name not in joint_index:
-                raise HandSpecError(where, f"{what} names unknown joint {name!r}", f"joints: {self.joint_names}")
-            return joint_index[name]
-
-        self.chain = build_chain(flat.xml, m.body(1).name, dtype=self.dtype, device=self.device)
-        chain_joints = self.chain.get_joint_parameter_names()
-        if sorted(chain_joints) != sorted(self.joint_names):
-            raise HandSpecError(where, "pytorch-kinematics and MuJoCo disagree on the joints")
-        self._chain_perm = [joint_index[n] for n in chain_joints]  # chain order -> our order
-        self._frame_idx = self.chain.get_frame_indices(*self.link_names)
-
-        limited = m.jnt_limited.astype(bool)
-        lo = np.where(limited, m.jnt_range[:, 0], -np.pi)
-        hi = np.where(limited, m.jnt_range[:, 1], np.pi)
+        need_link = _lookup(self.link_names, "link", where)
+        need_joint = _lookup(self.joint_names, "joint", where)
+        self._build_chain(flat, where)
+        lo, hi = _joint_limits(m)
         self._np = {"lower": lo, "upper": hi}
-        sph, sph_link = [], []
-        for link, spheres in spec.spheres.items():
-            i = need_link(link, "spheres")
-            sph += [s for s in spheres]
-            sph_link += [i] * len(spheres)
-        sph_arr = np.asarray(sph, dtype=np.float64).reshape(-1, 4)
-        self.fingertip_names: list[str] = list(spec.fingertips)
+        sph_arr, sph_link, first = _sphere_table(spec, need_link)
         tips = list(spec.fingertips.values())
+        self.fingertip_names: list[str] = list(spec.fingertips)
         self.palm_link = need_link(spec.palm.link, "palm")
         self.sphere_margin_m: float = spec.sphere_margin_m
         self._couple = [(need_joint(c.joint, "couplings"), need_joint(c.leader, "couplings"), c.ratio, c.offset)
@@ -91,42 +67,40 @@ class HandModel:
         open_pose = np.clip(np.zeros(m.njnt), lo, hi)
         for name, value in spec.open_pose.items():
             open_pose[need_joint(name, "open_pose")] = value
-        pairs = []
-        first = {}
-        for k, li in enumerate(sph_link):
-            first.setdefault(li, k)
-        for pr in spec.self_collision_pairs:
-            ia, ib = need_link(pr.link_a, "self_collision_pairs"), need_link(pr.link_b, "self_collision_pairs")
-            na, nb = sph_link.count(ia), sph_link.count(ib)
-            sa = [first[ia] + i for i in (pr.spheres_a or range(na))]
-            sb = [first[ib] + i for i in (pr.spheres_b or range(nb))]
-            pairs += [(x, y) for x in sa for y in sb]
         # each fingertip's contact sphere (index into the spheres) where the spec names one, else None
         self.fingertip_spheres: list[int | None] = [
             None if t.sphere is None else first[need_link(t.link, "fingertips")] + t.sphere for t in tips]
         self.self_collision_link_pairs: list[tuple[str, str]] = [(p.link_a, p.link_b)
                                                                   for p in spec.self_collision_pairs]
         self.actuator_names: list[str] = [m.actuator(u).name for u in range(m.nu)]
-        ctrl = actuator_matrix(m, flat.source)
-        host = {
+        self._host = {
             "joint_lower": lo, "joint_upper": hi,
             "sphere_centres_local": sph_arr[:, :3], "sphere_radii": sph_arr[:, 3],
             "fingertip_points_local": np.array([t.point for t in tips]),
             "fingertip_normals_local": np.array([t.normal for t in tips]),
             "palm_local": np.array([spec.palm.origin, spec.palm.approach, spec.palm.thumb]),
-            "ctrl_matrix": ctrl, "ctrl_range": m.actuator_ctrlrange.copy(),
+            "ctrl_matrix": actuator_matrix(m, flat.source), "ctrl_range": m.actuator_ctrlrange.copy(),
         }
-        self._host = host
         self._index = {
             "sphere_link": np.asarray(sph_link, dtype=np.int64),
             "fingertip_link": np.asarray([need_link(t.link, "fingertips") for t in tips], dtype=np.int64),
-            "self_collision_pairs": np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+            "self_collision_pairs": _sphere_pairs(spec, sph_link, first, need_link),
             "qpos_index": m.jnt_qposadr.astype(np.int64),
         }
         self._open_pose = open_pose
         self._move()
         self.open_pose = self.apply_couplings(self.open_pose)
         self._check_against_mujoco(where)
+
+    def _build_chain(self, flat: FlatHand, where: str | None) -> None:
+        """The pytorch-kinematics chain of the flattened MJCF, its joint order mapped to ours."""
+        self.chain = build_chain(flat.xml, flat.model.body(1).name, dtype=self.dtype, device=self.device)
+        chain_joints = self.chain.get_joint_parameter_names()
+        if sorted(chain_joints) != sorted(self.joint_names):
+            raise HandSpecError(where, "pytorch-kinematics and MuJoCo disagree on the joints")
+        joint_index = {n: i for i, n in enumerate(self.joint_names)}
+        self._chain_perm = [joint_index[n] for n in chain_joints]  # chain order -> our order
+        self._frame_idx = self.chain.get_frame_indices(*self.link_names)
 
     def _check_against_mujoco(self, where: str | None, tol: float = 1e-4) -> None:
         """One FK evaluation against mj_kinematics at load: catches what pytorch-kinematics'
@@ -293,3 +267,46 @@ class HandModel:
         return (f"HandModel({self.name!r}, joints={self.num_joints}, links={len(self.link_names)}, "
                 f"spheres={self.num_spheres}, fingertips={self.fingertip_names}, device={self.device}, "
                 f"dtype={self.dtype})")
+
+
+def _lookup(names: list[str], kind: str, where: str | None):
+    """``need(name, what) -> index`` into ``names``; an unknown name raises naming the spec field."""
+    index = {n: i for i, n in enumerate(names)}
+
+    def need(name: str, what: str) -> int:
+        if name not in index:
+            raise HandSpecError(where, f"{what} names unknown {kind} {name!r}", f"{kind}s: {names}")
+        return index[name]
+    return need
+
+
+def _joint_limits(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper limits (J,), rad or m; an unlimited joint gets [-pi, pi]."""
+    limited = m.jnt_limited.astype(bool)
+    return np.where(limited, m.jnt_range[:, 0], -np.pi), np.where(limited, m.jnt_range[:, 1], np.pi)
+
+
+def _sphere_table(spec: HandSpec, need_link) -> tuple[np.ndarray, list[int], dict[int, int]]:
+    """The spec's spheres as ``(S, 4)`` [x y z r] in their links' frames (m), each sphere's link
+    index, and each link's first sphere index."""
+    sph, sph_link = [], []
+    for link, spheres in spec.spheres.items():
+        i = need_link(link, "spheres")
+        sph += list(spheres)
+        sph_link += [i] * len(spheres)
+    first: dict[int, int] = {}
+    for k, li in enumerate(sph_link):
+        first.setdefault(li, k)
+    return np.asarray(sph, dtype=np.float64).reshape(-1, 4), sph_link, first
+
+
+def _sphere_pairs(spec: HandSpec, sph_link: list[int], first: dict[int, int], need_link) -> np.ndarray:
+    """``(P, 2)`` sphere index pairs of the spec's self-collision link pairs (empty lists = all)."""
+    pairs = []
+    for pr in spec.self_collision_pairs:
+        ia, ib = need_link(pr.link_a, "self_collision_pairs"), need_link(pr.link_b, "self_collision_pairs")
+        na, nb = sph_link.count(ia), sph_link.count(ib)
+        sa = [first[ia] + i for i in (pr.spheres_a or range(na))]
+        sb = [first[ib] + i for i in (pr.spheres_b or range(nb))]
+        pairs += [(x, y) for x in sa for y in sb]
+    return np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
