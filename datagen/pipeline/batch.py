@@ -241,67 +241,87 @@ def run_batch(objects: Sequence[BatchObject], hand, recipes: Sequence, *, grasps
     for the MuJoCo tests and ``eval_spare_cores`` (`evaluate_rows`). ``progress(done, total)``
     in work units: one per object's target, then per task as many for its synthesis (moving with
     its iterations) and as many again for its evaluation as there are objects x scales."""
-    from datagen.tasks import task_targets
-
     timings = {"target_s": 0.0, "synth_s": 0.0, "eval_s": 0.0}
     fails: list[dict] = []
-    tables: list[pa.Table] = []
-    grids = {r.grid_resolution for r in recipes}
-    if len(grids) > 1:
-        raise ValueError(f"run_batch: the recipes must share one grid_resolution, got {sorted(grids)}")
-    scenes = {r.scene for r in recipes}
-    if len(scenes) > 1:
-        raise ValueError(f"run_batch: the recipes must share one scene, got {sorted(s.kind for s in scenes)}")
+    grid, scene = _shared(recipes, "grid_resolution"), _shared(recipes, "scene")
     n_targets = sum(len(o.scales) for o in objects)
-    total = len(objects) + 2 * len(recipes) * n_targets
-    done = 0.0
-
-    def report(units: float, absolute: bool = False) -> None:
-        nonlocal done
-        done = units if absolute else done + units
-        if progress is not None:
-            progress(min(done, total), total)
-
+    units = _Units(progress, len(objects) + 2 * len(recipes) * n_targets)
     t0 = time.perf_counter()
-    all_targets = build_targets(objects, grid_resolution=grids.pop() if grids else None, cache=cache,
-                                device=device, failures=fails, progress=lambda: report(1),
-                                scene=scenes.pop() if scenes else None)
+    all_targets = build_targets(objects, grid_resolution=grid, cache=cache, device=device, failures=fails,
+                                progress=lambda: units.add(1), scene=scene)
     timings["target_s"] = time.perf_counter() - t0
-    report(len(objects), absolute=True)
+    units.set(len(objects))
     splits = {o.object_id: o.split for o in objects}
+    tables: list[pa.Table] = []
     for k, recipe in enumerate(recipes):
-        report(len(objects) + 2 * k * n_targets, absolute=True)
-        task, synth_cfg = recipe.load_task(), recipe.synth
-        if seed is not None:
-            synth_cfg = dataclasses.replace(synth_cfg, seed=seed)
-        targets = task_targets(task, all_targets)
-        if not targets:
-            continue
-        t0 = time.perf_counter()
-        start = done
-
-        def moved(it, *_):  # progress per optimizer iteration (reads nothing of the state)
-            report(start + n_targets * (it + 1) / max(synth_cfg.iters, 1), absolute=True)
-
-        try:
-            _, table = synthesize_rows(hand, targets, task, synth_cfg, grasps_per_object, splits=splits,
-                                       grasp_types=recipe.grasp_types, type_synth=recipe.grasp_type_synth,
-                                       callback=moved)
-        except Exception as exc:  # noqa: BLE001 - the batch's objects fail, the other tasks go on
-            for t in targets:
-                fails.append(failure(t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "
-                                     f"{task.name}: {type(exc).__name__}: {exc}", t.scale, task.name))
-            timings["synth_s"] += time.perf_counter() - t0
-            continue
-        timings["synth_s"] += time.perf_counter() - t0
-        report(start + n_targets, absolute=True)
-        t0 = time.perf_counter()
-        tables += evaluate_rows(table, targets, task.name, recipe.eval, base=base, failures=fails,
-                                progress=lambda: report(n_targets / len(targets)), workers=eval_workers,
-                                spare_cores=eval_spare_cores)
-        timings["eval_s"] += time.perf_counter() - t0
+        units.set(len(objects) + 2 * k * n_targets)
+        tables += _run_recipe(hand, recipe, all_targets, units, n_targets, fails, timings, seed=seed,
+                              grasps_per_object=grasps_per_object, splits=splits, base=base,
+                              eval_workers=eval_workers, eval_spare_cores=eval_spare_cores)
     schema = arrow_schema("evaluated", nq=7 + hand.num_joints).remove_metadata()
     rows = (pa.concat_tables([tb.select(schema.names).cast(schema) for tb in tables]) if tables
             else schema.empty_table())
-    report(total, absolute=True)
+    units.set(units.total)
     return BatchResult(rows, fails, timings)
+
+
+class _Units:
+    """The batch's progress in work units, reported as ``progress(done, total)``."""
+
+    def __init__(self, progress: Progress | None, total: float) -> None:
+        self.progress, self.total, self.done = progress, total, 0.0
+
+    def set(self, units: float) -> None:
+        self.done = units
+        if self.progress is not None:
+            self.progress(min(self.done, self.total), self.total)
+
+    def add(self, units: float) -> None:
+        self.set(self.done + units)
+
+
+def _shared(recipes: Sequence, field_name: str):
+    """The one value of a recipe field every recipe of a batch must share (None without recipes)."""
+    values = {getattr(r, field_name) for r in recipes}
+    if len(values) > 1:
+        shown = sorted(getattr(v, "kind", v) for v in values)
+        raise ValueError(f"run_batch: the recipes must share one {field_name}, got {shown}")
+    return values.pop() if values else None
+
+
+def _run_recipe(hand, recipe, all_targets, units: _Units, n_targets: int, fails: list[dict],
+                timings: dict[str, float], *, seed, grasps_per_object, splits, base, eval_workers,
+                eval_spare_cores) -> list[pa.Table]:
+    """One task's synthesis and evaluation over the batch's targets: its evaluated tables (none
+    where its synthesis fails, each of its targets then recorded as a failure)."""
+    from datagen.tasks import task_targets
+
+    task, synth_cfg = recipe.load_task(), recipe.synth
+    if seed is not None:
+        synth_cfg = dataclasses.replace(synth_cfg, seed=seed)
+    targets = task_targets(task, all_targets)
+    if not targets:
+        return []
+    t0, start = time.perf_counter(), units.done
+
+    def moved(it, *_):  # progress per optimizer iteration (reads nothing of the state)
+        units.set(start + n_targets * (it + 1) / max(synth_cfg.iters, 1))
+
+    try:
+        _, table = synthesize_rows(hand, targets, task, synth_cfg, grasps_per_object, splits=splits,
+                                   grasp_types=recipe.grasp_types, type_synth=recipe.grasp_type_synth,
+                                   callback=moved)
+    except Exception as exc:  # noqa: BLE001 - the batch's objects fail, the other tasks go on
+        for t in targets:
+            fails.append(failure(t.object_id, "synth", "error", f"{t.object_id} at {t.scale} m, task "
+                                 f"{task.name}: {type(exc).__name__}: {exc}", t.scale, task.name))
+        return []
+    finally:
+        timings["synth_s"] += time.perf_counter() - t0
+    units.set(start + n_targets)
+    t0 = time.perf_counter()
+    tables = evaluate_rows(table, targets, task.name, recipe.eval, base=base, failures=fails,
+                           progress=lambda: units.add(n_targets / len(targets)), workers=eval_workers,
+                           spare_cores=eval_spare_cores)
+    timings["eval_s"] += time.perf_counter() - t0
+    return tables
