@@ -149,7 +149,28 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     object's joint (None: free); ``table`` (4,) ``[n, d]``: the support plane of a tabletop row
     (None: no table). Raises `EvalError` if MuJoCo rejects the model."""
     spec = mujoco.MjSpec()
-    opt = spec.option
+    _set_options(spec.option, cfg)
+    spec.compiler.degree = False
+    palm = _attach_hand(spec, hand, cfg)
+    _set_hand_physics(spec, hand, cfg)
+    body = _add_object_body(spec, task)
+    if task is not None and task.scenery:
+        _add_scenery(spec, task.scenery, cfg)
+    if table is not None:
+        _add_table(spec, np.asarray(table, dtype=np.float64), cfg)
+    _add_object_pieces(spec, body, pieces, cfg)
+    spec.worldbody.add_light(pos=[0, 0, 1.5], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+                             castshadow=False)
+    try:
+        model = spec.compile()
+    except Exception as exc:
+        raise EvalError(f"scene of hand {hand.name!r} and object {pieces.object_id!r}",
+                        f"MuJoCo cannot compile it: {str(exc).strip()}") from None
+    return _index(model, hand, pieces, "free" if task is None else task.joint, palm)
+
+
+def _set_options(opt, cfg: EvalConfig) -> None:
+    """The scene's solver options from the protocol (``opt``: an MjSpec's option)."""
     opt.timestep = cfg.timestep_s
     opt.gravity = list(cfg.gravity)
     opt.integrator = _INTEGRATORS[cfg.integrator]
@@ -160,8 +181,12 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_MULTICCD)
     if not cfg.island:
         opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
-    spec.compiler.degree = False
 
+
+def _attach_hand(spec: mujoco.MjSpec, hand, cfg: EvalConfig) -> "_PalmKinematics | None":
+    """The hand under a free ``hand_base`` body welded to the ``hand_mocap`` body: the whole hand
+    (``hand_root`` spec) or the palm's subtree without the wrist joints and their actuators,
+    tendons and sensors (``hand_root`` palm; returned, None for the whole hand)."""
     hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
     palm = _PalmKinematics(hand) if cfg.hand_root == "palm" else None
     if palm is not None and palm.palm == hand.spec.root_body:
@@ -181,24 +206,34 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
     else:  # the palm's subtree, its frame at the hand base; the wrist joints and actuators dropped
         body = base.add_frame().attach_body(hand_spec.body(palm.palm), HAND_PREFIX, "")
         body.pos, body.quat = [0, 0, 0], [1, 0, 0, 0]
-        held = {HAND_PREFIX + n for n in palm.held_names}
-        for j in list(body.joints):
-            spec.delete(j)
-        held |= {HAND_PREFIX + n for n in palm.held_tendons}
-        for a in [a for a in spec.actuators if a.target in held]:
-            spec.delete(a)
-        for t in [t for t in spec.tendons if t.name in held]:
-            spec.delete(t)
-        for x in [x for x in spec.sensors if x.objname in held]:
-            spec.delete(x)
+        _drop_wrist(spec, body, palm)
     spec.worldbody.add_body(name="hand_mocap", mocap=True)
     weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                              name1="hand_mocap", name2="hand_base")
     # data = anchor (3), relpose pos (3) and quat (4), torquescale, flag (0: relpose as given)
     weld.data[:12] = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0]
     weld.solref = list(cfg.weld_solref)
+    return palm
 
-    if cfg.joint_frictionloss is not None:  # the hand's joints (the object's are added below)
+
+def _drop_wrist(spec: mujoco.MjSpec, body, palm: "_PalmKinematics") -> None:
+    """Delete the palm body's own joints and the actuators, tendons and sensors of the held wrist."""
+    held = {HAND_PREFIX + n for n in palm.held_names}
+    for j in list(body.joints):
+        spec.delete(j)
+    held |= {HAND_PREFIX + n for n in palm.held_tendons}
+    for a in [a for a in spec.actuators if a.target in held]:
+        spec.delete(a)
+    for t in [t for t in spec.tendons if t.name in held]:
+        spec.delete(t)
+    for x in [x for x in spec.sensors if x.objname in held]:
+        spec.delete(x)
+
+
+def _set_hand_physics(spec: mujoco.MjSpec, hand, cfg: EvalConfig) -> None:
+    """The protocol's joint friction, contact parameters (geoms and explicit self-collision
+    pairs) and position-actuator gains on the hand (the only bodies in ``spec`` so far)."""
+    if cfg.joint_frictionloss is not None:  # the hand's joints (the object's are added later)
         for j in spec.joints:
             if j.type != mujoco.mjtJoint.mjJNT_FREE:
                 j.frictionloss = cfg.joint_frictionloss
@@ -222,28 +257,37 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
         if g.force_limit is not None:
             a.forcerange = [-g.force_limit, g.force_limit]
 
+
+def _add_object_body(spec: mujoco.MjSpec, task: TaskTest | None):
+    """The ``object`` body with its joint: free, or the task's hinge / slide (and its stops)."""
     body = spec.worldbody.add_body(name="object")
     if task is None or task.joint == "free":
         body.add_freejoint(name="object_joint")
-    else:
-        kind = mujoco.mjtJoint.mjJNT_HINGE if task.joint == "hinge" else mujoco.mjtJoint.mjJNT_SLIDE
-        j = body.add_joint(name="object_joint", type=kind, axis=list(task.axis), pos=list(task.anchor),
-                           damping=0.0, armature=0.0)
-        if task.limits is not None:  # a free side: a stop far beyond any pass threshold
-            j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
-            j.range = [-_NO_STOP if task.limits[0] is None else task.limits[0],
-                       _NO_STOP if task.limits[1] is None else task.limits[1]]
-    scenery = () if task is None else task.scenery
-    if scenery:  # static boxes round a mounted part: they stop the hand, not the part (it moves inside them)
-        env = spec.worldbody.add_body(name="scenery")
-        for i, (lo, hi) in enumerate(scenery):
-            lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-            g = env.add_geom(name=f"scenery_geom_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=list((lo + hi) / 2),
-                             size=list((hi - lo) / 2), rgba=[0.6, 0.6, 0.65, 0.5])
-            _set_contact(g, cfg, hand=False)
-        spec.add_exclude(bodyname1="object", bodyname2="scenery")
-    if table is not None:
-        _add_table(spec, np.asarray(table, dtype=np.float64), cfg)
+        return body
+    kind = mujoco.mjtJoint.mjJNT_HINGE if task.joint == "hinge" else mujoco.mjtJoint.mjJNT_SLIDE
+    j = body.add_joint(name="object_joint", type=kind, axis=list(task.axis), pos=list(task.anchor),
+                       damping=0.0, armature=0.0)
+    if task.limits is not None:  # a free side: a stop far beyond any pass threshold
+        j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        j.range = [-_NO_STOP if task.limits[0] is None else task.limits[0],
+                   _NO_STOP if task.limits[1] is None else task.limits[1]]
+    return body
+
+
+def _add_scenery(spec: mujoco.MjSpec, scenery, cfg: EvalConfig) -> None:
+    """Static boxes ``[(lo (3,), hi (3,)), ...]`` m round a mounted part: they stop the hand, not
+    the part (it moves inside them)."""
+    env = spec.worldbody.add_body(name="scenery")
+    for i, (lo, hi) in enumerate(scenery):
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        g = env.add_geom(name=f"scenery_geom_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=list((lo + hi) / 2),
+                         size=list((hi - lo) / 2), rgba=[0.6, 0.6, 0.65, 0.5])
+        _set_contact(g, cfg, hand=False)
+    spec.add_exclude(bodyname1="object", bodyname2="scenery")
+
+
+def _add_object_pieces(spec: mujoco.MjSpec, body, pieces: ObjectPieces, cfg: EvalConfig) -> None:
+    """The object's convex pieces as mesh geoms, the protocol's mass shared by volume."""
     total = sum(pieces.volumes)
     s = pieces.scale
     for i, (path, vol) in enumerate(zip(pieces.paths, pieces.volumes)):
@@ -253,14 +297,6 @@ def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | No
                           meshname=f"object_piece_{i}", mass=cfg.object_mass_kg * vol / total,
                           rgba=[0.85, 0.55, 0.2, 1.0])
         _set_contact(g, cfg, hand=False)
-    spec.worldbody.add_light(pos=[0, 0, 1.5], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
-                             castshadow=False)
-    try:
-        model = spec.compile()
-    except Exception as exc:
-        raise EvalError(f"scene of hand {hand.name!r} and object {pieces.object_id!r}",
-                        f"MuJoCo cannot compile it: {str(exc).strip()}") from None
-    return _index(model, hand, pieces, "free" if task is None else task.joint, palm)
 
 
 def _add_table(spec: mujoco.MjSpec, plane: np.ndarray, cfg: EvalConfig) -> None:
