@@ -24,6 +24,7 @@ class EnergyWeights(Config):
     self_penetration: float = 1e5  #: per m^2 of summed squared sphere-pair overlap
     joint_limits: float = 1e2  #: per rad of summed joint-limit violation
     link_distance: float = 1e4  #: per m^2 of summed squared gap of a grasp type's pulled links (the palm of a power grasp)
+    wrap_reach: float = 0.0  #: per m^2 of the farthest fingertip's squared shortfall of the object's middle along the palm's approach (a power grasp's option)
 
     def __post_init__(self):
         for f in fields(self):
