@@ -16,7 +16,7 @@
 * ``E_joint``: summed joint-limit violation (rad);
 * ``E_reach`` (a power grasp's option, ``weights.wrap_reach``; not in the paper): ``max(0, -r)^2``
   (m^2), ``r`` how far the task fingertip farthest along the palm's approach axis lies past the
-  object's middle along that axis (:func:`wrap_reach`): fingers that stop on the near half of a
+  object's middle along that axis (plus ``cfg.wrap_reach_past`` of its half extent: :func:`wrap_reach`): fingers that stop on the near half of a
   big object only push it out of the palm, one past the middle presses it into the palm.
 
 The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
@@ -125,24 +125,28 @@ def contact_sphere_index(hand) -> torch.Tensor:
     return torch.stack(out)
 
 
-def wrap_reach(hand, targets, object_index: torch.Tensor, transforms: torch.Tensor, tips: torch.Tensor) -> torch.Tensor:
+def wrap_reach(hand, targets, object_index: torch.Tensor, transforms: torch.Tensor, tips: torch.Tensor,
+               past: float = 0.0) -> torch.Tensor:
     """``(B,)`` m: how far the task fingertip farthest along the palm's approach axis ``a`` (out of
     the palm) lies past the object's middle along ``a``, ``max_i tips_i . a - (h_max + h_min) / 2``
     with ``h`` the object's convex-hull samples projected on ``a`` (> 0: a fingertip is on the far
-    half, opposing the palm). ``transforms`` ``(B, links, 4, 4)`` the hand's link poses, ``tips``
-    ``(B, F, 3)`` the fingertips' contact-sphere centres, m, object frame."""
+    half, opposing the palm). ``past``: the middle moved that fraction of the half extent
+    ``(h_max - h_min) / 2`` further out (0: the middle, 1: the far side). ``transforms``
+    ``(B, links, 4, 4)`` the hand's link poses, ``tips`` ``(B, F, 3)`` the fingertips'
+    contact-sphere centres, m, object frame."""
     a = transforms[:, hand.palm_link, :3, :3] @ hand.palm_local[1].to(tips)  # (B, 3)
     H = max(len(t.hull_points) for t in targets)
     hull = torch.stack([t.hull_points[torch.arange(H) % len(t.hull_points)] for t in targets]).to(tips)  # (T, H, 3)
     h = (hull[object_index] @ a[:, :, None]).squeeze(-1)  # (B, H)
-    return (tips @ a[:, :, None]).squeeze(-1).amax(-1) - 0.5 * (h.amax(-1) + h.amin(-1))
+    hi, lo = h.amax(-1), h.amin(-1)
+    return (tips @ a[:, :, None]).squeeze(-1).amax(-1) - 0.5 * (hi + lo) - past * 0.5 * (hi - lo)
 
 
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None, pieces=None, reach: bool = False) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None, pieces=None, reach: float | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -155,7 +159,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
     distance term pulls; ``pieces``: the targets' convex pieces (`GraspTarget.pieces`, same
     order), each sphere's penetration the deeper of the surface's and the pieces' (None: the
-    surface's); ``reach``: also the fingertips' :func:`wrap_reach` (for ``E_reach``).
+    surface's); ``reach``: also the fingertips' :func:`wrap_reach` past that fraction of the object's
+    half extent beyond its middle (``cfg.wrap_reach_past``, for ``E_reach``; None: not computed).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -183,7 +188,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
         links=(link_contacts(hand, targets, object_index, centres, radii, links)
                if links is not None and links.numel() else None),
         link_pull=link_pull,
-        reach=wrap_reach(hand, targets, object_index, T, tips) if reach else None,
+        reach=None if reach is None else wrap_reach(hand, targets, object_index, T, tips, reach),
     )
 
 

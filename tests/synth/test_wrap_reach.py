@@ -10,6 +10,7 @@ import trimesh
 
 from datagen.errors import ConfigError
 from datagen.hands import load_hand
+from datagen.pipeline import resolve
 from datagen.synth import GraspTarget, SynthConfig, synthesize
 from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state, wrap_reach
 from datagen.synth.init import initial_poses
@@ -81,10 +82,12 @@ def test_reach_and_its_energy_match_mujoco_kinematics(hand, box):
     shifted = dataclasses.replace(box, hull_points=box.hull_points + torch.tensor([0.0, 0.0, 0.01]))
     a = (T[:, hand64.palm_link, :3, :3] @ torch.tensor(hand64.spec.palm.approach, dtype=torch.float64))
     assert torch.allclose(wrap_reach(hand64, [shifted], idx, T, centres[:, ts]), r - 0.01 * a[:, 2], atol=1e-6)
+    half = 0.5 * np.abs(EXTENTS @ np.abs(a.numpy().T))  # the box's half extent along each a
+    assert np.allclose(wrap_reach(hand64, [box], idx, T, centres[:, ts], past=0.5).numpy(), ref - 0.5 * half, atol=1e-5)
     cfg = SynthConfig().for_hand(hand64)
     task = load_task("force_closure")
     dirs = torch.eye(6, dtype=torch.float64)
-    state = hand_object_state(hand64, [box], idx, root, joints, ts, sphere_margin=cfg.sphere_margin_m, reach=True)
+    state = hand_object_state(hand64, [box], idx, root, joints, ts, sphere_margin=cfg.sphere_margin_m, reach=0.0)
     off = evaluate_state(state, cfg, task, dirs)
     on = evaluate_state(state, dataclasses.replace(cfg, weights=dataclasses.replace(cfg.weights, wrap_reach=1e4)), task, dirs)
     want = 1e4 * np.maximum(0.0, -ref) ** 2
@@ -92,9 +95,13 @@ def test_reach_and_its_energy_match_mujoco_kinematics(hand, box):
     assert np.allclose(on.wrap_reach.numpy(), want / 1e4, atol=1e-12)
 
 
-def test_a_negative_reach_weight_is_refused():
+def test_a_negative_reach_weight_or_a_target_past_the_far_side_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="wrap_reach must be a finite number >= 0"):
         SynthConfig.from_dict({"weights": {"wrap_reach": -1.0}})
+    bad = tmp_path / "far.yaml"  # a grasp type's synth block: refused when its recipe is built
+    bad.write_text("name: far\ncontacts: {palm: pull}\nsynth: {wrap_reach_past: 1.5, weights: {wrap_reach: 10000}}\n")
+    with pytest.raises(ConfigError, match=r"SynthConfig.wrap_reach_past must be in \[0, 1\)"):
+        resolve("shadow", "force_closure", config={"grasp_types": str(bad)}).synth_for(str(bad))
 
 
 @pytest.mark.slow
