@@ -53,7 +53,6 @@ class SynthConfig(Config):
     momentum: float = 0.9  #: m <- (momentum * m + g) / 2 on per-group normalized gradients
     squeeze_force_n: float = 10.0  #: largest fingertip grip force of the squeeze, N (best of 2/4/10/20 in MuJoCo holds)
     squeeze_gap_m: float = 0.002  #: extra fingertip travel along the normal at the squeeze (sphere overshoot), m
-    squeeze_palm_m: float = 0.0  #: a power grasp's squeeze moves the root to press the palm in by its gap plus this, m (0: the root stays)
     squeeze_kp: float = 5.0  #: position-actuator stiffness the squeeze is computed for, N m/rad: the evaluation's
                              #: for this hand (its protocol's gains), set by the resolver (not a setting of its own)
     contact_threshold_m: float = 0.005  #: fingertips closer than this count as in contact
@@ -103,8 +102,6 @@ class SynthConfig(Config):
             raise ConfigError(f"SynthConfig.pinch_antipodal must be a finite number >= 0, got {self.pinch_antipodal}")
         if self.seed_max_depth_m is not None and not (math.isfinite(self.seed_max_depth_m) and self.seed_max_depth_m > 0):
             raise ConfigError(f"SynthConfig.seed_max_depth_m must be null or a finite number > 0 m, got {self.seed_max_depth_m}")
-        if not (math.isfinite(self.squeeze_palm_m) and 0 <= self.squeeze_palm_m < 0.01):
-            raise ConfigError(f"SynthConfig.squeeze_palm_m must be in [0, 0.01) m, got {self.squeeze_palm_m}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")

@@ -89,15 +89,13 @@ def grip_forces(points: torch.Tensor, inward_normals: torch.Tensor, mu: float, f
     return f * (force_n * balance / largest.clamp_min(1e-9))[:, None, None]
 
 
-def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m, root_shift=None):
+def _grip(hand, joints, J_force, f, J_tips, inward_normals, movable, kp, approach_m, damping_m):
     """``(pregrasp, squeeze)``: the squeeze is the grasp plus the joint displacement whose
     actuators exert ``J_force^T f`` (:func:`actuator_compliance`) plus the fingertips' motion
-    ``approach_m`` along their normals (less ``root_shift (B, 3)`` m, the root's own squeeze
-    translation, which carries the fingertips with it); the pregrasp is its mirror image."""
+    ``approach_m`` along their normals; the pregrasp is its mirror image about the grasp."""
     tau = (J_force.transpose(1, 2) @ f.reshape(f.shape[0], -1, 1)).squeeze(-1)
     dq_force = tau @ actuator_compliance(hand, movable).T / kp
-    e = approach_m * inward_normals if root_shift is None else approach_m * inward_normals - root_shift[:, None, :]
-    dq_gap = _damped_step(J_tips, e, damping_m)
+    dq_gap = _damped_step(J_tips, approach_m * inward_normals, damping_m)
     squeeze = hand.apply_couplings(joints + dq_force + dq_gap)
     return hand.apply_couplings(2 * joints - squeeze), squeeze
 
@@ -220,8 +218,7 @@ def actuator_compliance(hand, movable: torch.Tensor) -> torch.Tensor:
 def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spheres: torch.Tensor,
                   points: torch.Tensor, inward_normals: torch.Tensor, mu: float, kp: float, force_n: float,
                   approach_m: float, movable: torch.Tensor, damping_m: float = 0.01,
-                  mount: tuple | None = None, extra: tuple | None = None,
-                  root_shift: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                  mount: tuple | None = None, extra: tuple | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(pregrasp, squeeze)`` joints ``(B, J)`` whose squeeze makes balanced grip forces.
 
     Position actuators of stiffness ``kp`` (N m/rad) pushed ``dq`` past a blocked pose exert
@@ -248,7 +245,7 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     Jt = tip_jacobian(hand, root_pose, joints, tip_spheres) * mm  # (B, 3F, J)
     if extra is None:
         f = grip_forces(points, inward_normals, mu, force_n, mount=mount)
-        return _grip(hand, joints, Jt, f, Jt, inward_normals, movable, kp, approach_m, damping_m, root_shift)
+        return _grip(hand, joints, Jt, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
     lp, ln, links, touching = extra
     B, F = points.shape[:2]
     P, N = torch.cat([points, lp], 1), torch.cat([inward_normals, ln], 1)
@@ -257,7 +254,7 @@ def force_squeeze(hand, root_pose: torch.Tensor, joints: torch.Tensor, tip_spher
     f = grip_forces(P, N, mu, force_n, mount=mount, min_normal=lo, active=active, scale_count=F)
     tip_links = hand.sphere_link_index[tip_spheres].expand(B, F)
     Jc = point_jacobian(hand, root_pose, joints, torch.cat([tip_links, links], 1), P) * mm  # (B, 3C, J)
-    return _grip(hand, joints, Jc, f, Jt, inward_normals, movable, kp, approach_m, damping_m, root_shift)
+    return _grip(hand, joints, Jc, f, Jt, inward_normals, movable, kp, approach_m, damping_m)
 
 
 def point_jacobian(hand, root_pose: torch.Tensor, joints: torch.Tensor, links: torch.Tensor,

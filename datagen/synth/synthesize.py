@@ -303,42 +303,28 @@ def _squeeze_extra(hand, state, cfg):
     return lc.points, lc.normals, links, touching
 
 
-def _palm_shift(hand, root, joints, state, cfg, b: _Batch):
-    """``(B, 3)`` m: the root's squeeze translation that presses a power grasp's palm in, along
-    its approach axis by its gap plus ``cfg.squeeze_palm_m`` (rows whose palm is within
-    ``cfg.link_activation_m``; None: no palm contact, or the option off)."""
-    if cfg.squeeze_palm_m <= 0 or b.links is None or int(b.links[0]) != hand.palm_link:
-        return None
-    gap = state.links.gap[:, 0] + cfg.sphere_margin_m  # the palm's sphere past the pull's target, m
-    d = torch.where(gap <= cfg.link_activation_m, gap.clamp_min(0.0) + cfg.squeeze_palm_m, torch.zeros_like(gap))
-    return d[:, None] * hand.palm_frame(root, joints).approach
-
-
 def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
     """``(grasp, pregrasp, squeeze, state)`` at the optimized poses: the squeeze presses the task
     fingertips with balanced grip forces (`datagen.synth.squeeze.force_squeeze`), the pregrasp is
-    its mirror image pulled back where it would sink the hand deeper than the grasp; with
-    ``cfg.squeeze_palm_m`` a power grasp's root moves its palm in at the squeeze (out at the pregrasp)."""
+    its mirror image pulled back where it would sink the hand deeper than the grasp."""
     idx = b.object_index
     with torch.no_grad():
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
                                   link_pull=b.link_pull, pieces=b.pieces)
-        shift = _palm_shift(hand, root_f, grasp_j, state, cfg, b)
         pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
                                     cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
                                     finger_joint_mask(hand), mount=_mount(task, targets, idx),
-                                    extra=_squeeze_extra(hand, state, cfg), root_shift=shift)
+                                    extra=_squeeze_extra(hand, state, cfg))
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, idx, root_f, j, b.tip_spheres, self_collision=False,
                                      scenery=b.scenery, pieces=b.pieces).max_penetration
 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
-    move = (lambda r, s: r) if shift is None else (lambda r, s: torch.cat([r[:, :3] + s * shift, r[:, 3:]], -1))
-    cat = lambda r, j: torch.cat([r, j], -1)  # noqa: E731
-    return cat(root_f, grasp_j), cat(move(root_f, -1.0), pre_j), cat(move(root_f, 1.0), sq_j), state
+    cat = lambda j: torch.cat([root_f, j], -1)  # noqa: E731
+    return cat(grasp_j), cat(pre_j), cat(sq_j), state
 
 
 def _row_grasp_type(task: TaskSpec, grasp_type) -> str:
