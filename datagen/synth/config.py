@@ -24,7 +24,6 @@ class EnergyWeights(Config):
     self_penetration: float = 1e5  #: per m^2 of summed squared sphere-pair overlap
     joint_limits: float = 1e2  #: per rad of summed joint-limit violation
     link_distance: float = 1e4  #: per m^2 of summed squared gap of a grasp type's pulled links (the palm of a power grasp)
-    wrap_reach: float = 0.0  #: per m^2 of the farthest fingertip's squared shortfall of the object's middle along the palm's approach (a power grasp's option)
 
     def __post_init__(self):
         for f in fields(self):
@@ -70,7 +69,6 @@ class SynthConfig(Config):
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
-    wrap_reach_past: float = 0.0  #: E_reach's target: this fraction of the object's half extent past its middle along the palm's approach (0: the middle)
     penetration_pieces: bool = False  #: penetration terms also against the object's convex pieces (what MuJoCo collides: synth/pieces.py)
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)
     task: str = ""  #: the task whose ``synth:`` block this config holds (set by the resolver; "" none)
@@ -105,9 +103,6 @@ class SynthConfig(Config):
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")
-        if not (math.isfinite(self.wrap_reach_past) and 0 <= self.wrap_reach_past < 1):
-            raise ConfigError(f"SynthConfig.wrap_reach_past must be in [0, 1) (a fraction of the object's half extent), "
-                              f"got {self.wrap_reach_past}")
         if not (math.isfinite(self.link_activation_m) and self.link_activation_m > 0):
             raise ConfigError(f"SynthConfig.link_activation_m must be a finite number > 0 m, got {self.link_activation_m}")
         if self.iters < 1 or self.num_directions < 1:

@@ -13,11 +13,7 @@
   SDF grid (exact mesh distances are kept for the few fingertip contacts), plus the same against
   a mounted task object's static scenery (`datagen.synth.scenery`);
 * ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
-* ``E_joint``: summed joint-limit violation (rad);
-* ``E_reach`` (a power grasp's option, ``weights.wrap_reach``; not in the paper): ``max(0, -r)^2``
-  (m^2), ``r`` how far the task fingertip farthest along the palm's approach axis lies past the
-  object's middle along that axis (plus ``cfg.wrap_reach_past`` of its half extent: :func:`wrap_reach`): fingers that stop on the near half of a
-  big object only push it out of the palm, one past the middle presses it into the palm.
+* ``E_joint``: summed joint-limit violation (rad).
 
 The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
 touches the object, its gradient there ignores the obstacle, and a line search stalls on it
@@ -40,7 +36,7 @@ from datagen.synth.stacked import grid_query
 from datagen.wrench import pinch_antipodal_error
 from datagen.wrench.tws import task_wrench_at_contacts
 
-__all__ = ["EnergyTerms", "HandObjectState", "evaluate_state", "wrap_reach"]
+__all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
 
 
 @dataclass
@@ -57,7 +53,6 @@ class HandObjectState:
     joint_violation: torch.Tensor  # (B,) rad
     links: LinkContacts | None = None  # a grasp type's extra contact links (palm, phalanges), L of them
     link_pull: torch.Tensor | None = None  # (L,) bool: pulled onto the surface by E_dist (else GWS candidates only)
-    reach: torch.Tensor | None = None  # (B,) m, the farthest fingertip past the object's middle along the palm's approach
 
 
 @dataclass
@@ -71,13 +66,11 @@ class EnergyTerms:
     joint_limits: torch.Tensor
     total: torch.Tensor
     link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
-    wrap_reach: torch.Tensor | None = None  # the fingertips' squared shortfall of the object's middle, m^2
 
     def as_dict(self) -> dict[str, torch.Tensor]:
         out = {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
-        for k in ("link_distance", "wrap_reach"):
-            if getattr(self, k) is not None:
-                out[k] = getattr(self, k)
+        if self.link_distance is not None:
+            out["link_distance"] = self.link_distance
         return out
 
 
@@ -125,28 +118,11 @@ def contact_sphere_index(hand) -> torch.Tensor:
     return torch.stack(out)
 
 
-def wrap_reach(hand, targets, object_index: torch.Tensor, transforms: torch.Tensor, tips: torch.Tensor,
-               past: float = 0.0) -> torch.Tensor:
-    """``(B,)`` m: how far the task fingertip farthest along the palm's approach axis ``a`` (out of
-    the palm) lies past the object's middle along ``a``, ``max_i tips_i . a - (h_max + h_min) / 2``
-    with ``h`` the object's convex-hull samples projected on ``a`` (> 0: a fingertip is on the far
-    half, opposing the palm). ``past``: the middle moved that fraction of the half extent
-    ``(h_max - h_min) / 2`` further out (0: the middle, 1: the far side). ``transforms``
-    ``(B, links, 4, 4)`` the hand's link poses, ``tips`` ``(B, F, 3)`` the fingertips'
-    contact-sphere centres, m, object frame."""
-    a = transforms[:, hand.palm_link, :3, :3] @ hand.palm_local[1].to(tips)  # (B, 3)
-    H = max(len(t.hull_points) for t in targets)
-    hull = torch.stack([t.hull_points[torch.arange(H) % len(t.hull_points)] for t in targets]).to(tips)  # (T, H, 3)
-    h = (hull[object_index] @ a[:, :, None]).squeeze(-1)  # (B, H)
-    hi, lo = h.amax(-1), h.amin(-1)
-    return (tips @ a[:, :, None]).squeeze(-1).amax(-1) - 0.5 * (hi + lo) - past * 0.5 * (hi - lo)
-
-
 def hand_object_state(hand, targets, object_index, root_pose, joints, tip_spheres,
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None, pieces=None, reach: float | None = None) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None, pieces=None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -159,8 +135,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
     distance term pulls; ``pieces``: the targets' convex pieces (`GraspTarget.pieces`, same
     order), each sphere's penetration the deeper of the surface's and the pieces' (None: the
-    surface's); ``reach``: also the fingertips' :func:`wrap_reach` past that fraction of the object's
-    half extent beyond its middle (``cfg.wrap_reach_past``, for ``E_reach``; None: not computed).
+    surface's).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
@@ -188,7 +163,6 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
         links=(link_contacts(hand, targets, object_index, centres, radii, links)
                if links is not None and links.numel() else None),
         link_pull=link_pull,
-        reach=None if reach is None else wrap_reach(hand, targets, object_index, T, tips, reach),
     )
 
 
@@ -257,10 +231,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     e_link = e_dist.new_zeros(e_dist.shape)
     if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
         e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
-    e_reach = None if state.reach is None else torch.relu(-state.reach) ** 2
     total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
-    if e_reach is not None:
-        total = total + w.wrap_reach * e_reach
     return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total,
-                       link_distance=e_link if state.links is not None else None, wrap_reach=e_reach)
+                       link_distance=e_link if state.links is not None else None)

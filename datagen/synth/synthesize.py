@@ -254,8 +254,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces,
-                                      reach=cfg.wrap_reach_past if cfg.weights.wrap_reach > 0 else None)
+                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces)
             terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
