@@ -250,7 +250,7 @@ def _coerce_scalar(tp: type, v: Any, bad) -> Any:
     elif tp is float:
         ok = isinstance(v, (int, float)) and not isinstance(v, bool)
         if not ok:
-            raise bad("YAML reads 1e4 as a string: write 1.0e4" if isinstance(v, str) else "")
+            raise bad("YAML reads 1e4 and 1.0e4 as strings: write 1.0e+4 or 10000" if isinstance(v, str) else "")
         return float(v)
     else:
         ok = isinstance(v, str)

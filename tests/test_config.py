@@ -62,7 +62,12 @@ def test_yaml_1e4_is_a_string_and_the_remedy_says_so(tmp_path):
     p.write_text("iters: 10\nweights: {distance: 1e4}\n")
     with pytest.raises(ConfigError, match="weights.distance") as err:
         SynthConfig.from_yaml(p)
-    assert "1.0e4" in err.value.remedy
+    assert "1.0e+4" in err.value.remedy
+    p.write_text("iters: 10\nweights: {distance: 1.0e4}\n")  # a dot is not enough for YAML 1.1
+    with pytest.raises(ConfigError, match="weights.distance"):
+        SynthConfig.from_yaml(p)
+    p.write_text("iters: 10\nweights: {distance: 1.0e+4}\n")  # the remedy's form is a number
+    assert SynthConfig.from_yaml(p).weights.distance == 1e4
     p.write_text("iters: [10\n")
     with pytest.raises(ConfigError, match="not valid YAML"):
         SynthConfig.from_yaml(p)
