@@ -14,8 +14,9 @@ collision spheres per link from its collision geoms (`spheres.fit_link_spheres`)
 per finger on the pad of each fingertip link (leaf links with collision geometry), 70% along the
 link, in the middle of the pad's face (`_pad_centre`); the thumb (the finger whose pad faces the
 others', recorded as ``thumb_finger``); the palm frame (palm link = deepest common ancestor of the
-fingertips, approach = mean pad normal of the non-thumb fingers in the open pose, thumb axis
-across the fingers on the thumb's side); the open pose (zeros
+fingertips, approach = mean pad normal of the non-thumb fingers in the open pose, or from the
+palm's centre to the grasp centre where those face the thumb (`_approach`), thumb axis across the
+fingers on the thumb's side); the pads on the side each finger closes to (`closing`); the open pose (zeros
 clipped to limits, couplings applied); tendon/equality joint couplings; self-collision link pairs
 (not parent/child, not overlapping in the open pose).
 """
