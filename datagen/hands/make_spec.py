@@ -14,8 +14,9 @@ collision spheres per link from its collision geoms (`spheres.fit_link_spheres`)
 per finger on the pad of each fingertip link (leaf links with collision geometry), 70% along the
 link, in the middle of the pad's face (`_pad_centre`); the thumb (the finger whose pad faces the
 others', recorded as ``thumb_finger``); the palm frame (palm link = deepest common ancestor of the
-fingertips, approach = mean pad normal of the non-thumb fingers in the open pose, thumb axis
-across the fingers on the thumb's side); the open pose (zeros
+fingertips, approach = mean pad normal of the non-thumb fingers in the open pose, or from the
+palm's centre to the grasp centre where those face the thumb (`_approach`), thumb axis across the
+fingers on the thumb's side); the pads on the side each finger closes to (`closing`); the open pose (zeros
 clipped to limits, couplings applied); tendon/equality joint couplings; self-collision link pairs
 (not parent/child, not overlapping in the open pose).
 """
@@ -32,6 +33,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from .closing import closing_signs, link_centre
 from .geometry import collision_links, link_shapes, points_outward, sample_link_surface, union_depth
 from .mjcf import FlatHand, detect_couplings, flatten_hand, resolve_asset
 from .spec import (AssetRef, Fingertip, HandSpec, HandSpecError, PalmFrame, SelfCollisionPair,
@@ -41,6 +43,7 @@ from .spheres import fit_link_spheres
 __all__ = ["propose_spec", "main"]
 
 PAD_FACE_DEPTH_M = 0.001  # a fingertip's pad face: its surface within this of the most padward point
+FACING_THUMB_DEG = 30.0   # the fingers' mean pad direction leaning more towards the thumb: not the palm's normal
 
 
 def _ancestors(model: mujoco.MjModel, body: int) -> list[int]:
@@ -115,12 +118,12 @@ def _contact_sphere(spheres: np.ndarray, point: np.ndarray, normal: np.ndarray) 
     return int(np.flatnonzero(reach)[np.argmin(across[reach])]) if reach.any() else int(np.argmax(out))
 
 
-def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Contact point, its outward normal (link frame) and the pad direction (world) of a fingertip."""
+def _pad_contact(model, data, body: int, signs: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contact point, its outward normal (link frame) and the pad direction (world) of a fingertip;
+    ``signs`` (njnt,): the way each joint closes (`closing.closing_signs`)."""
     joint_body = next(a for a in _ancestors(model, body) if model.body_jntnum[a] > 0)
     j = int(model.body_jntadr[joint_body] + model.body_jntnum[joint_body] - 1)
-    lo, hi = model.jnt_range[j] if model.jnt_limited[j] else (-1.0, 1.0)
-    closing = 1.0 if abs(hi) >= abs(lo) else -1.0
+    closing = float(signs[j])
     shapes = link_shapes(model, body)
     pts, nrm = sample_link_surface(shapes, 4000, rng)
     R, t = data.xmat[body].reshape(3, 3), data.xpos[body]
@@ -142,6 +145,30 @@ def _pad_contact(model, data, body: int, rng) -> tuple[np.ndarray, np.ndarray, n
     if not points_outward(shapes, pts[best], normal):  # at a box's or hull's edge: the sampled face's normal
         normal = nrm[best] / np.linalg.norm(nrm[best])
     return pts[best], normal, R @ pad
+
+
+def _approach(data, model, fingertips: dict, pads: dict, thumb: str, palm_centre: np.ndarray) -> np.ndarray:
+    """Palm approach (world, not normalized): the mean pad direction of the non-thumb fingers;
+    where that leans towards the thumb by more than ``FACING_THUMB_DEG`` (fingers that face the
+    thumb, not the palm's normal: a Barrett hand's, a claw's), the direction from the palm's
+    centre (``palm_centre``, world) to the grasp centre: the midpoint of the thumb's pad and the
+    other pads' centroid. (The mean alone tilted the Barrett's approach 42 deg towards its thumb;
+    a claw's pads, facing one another, say nothing about it.)"""
+    rest = [k for k in pads if k != thumb] or list(pads)
+    mean = np.mean([pads[k] for k in rest], axis=0)
+    if len(rest) == len(pads):
+        return mean
+
+    def world(f):
+        b = model.body(fingertips[f].link).id
+        return data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(fingertips[f].point)
+
+    others = np.mean([world(k) for k in rest], axis=0)
+    line = others - world(thumb)  # thumb to fingers
+    line /= np.linalg.norm(line)
+    if -float(mean @ line) / np.linalg.norm(mean) <= np.sin(np.radians(FACING_THUMB_DEG)):
+        return mean
+    return 0.5 * (others + world(thumb)) - palm_centre
 
 
 def _thumb_axis(model, data, palm: int, origin: np.ndarray, approach: np.ndarray, fingertips: dict,
@@ -254,10 +281,11 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
         names = [model.body(b).name for b in tips]
     if not tips:
         raise HandSpecError(source, "no fingertip links found", "pass --finger LINK=NAME")
+    signs = closing_signs(model, data, tips, [link_centre(data, b, link_shapes(model, b)) for b in tips])
     rng = np.random.default_rng([fit.seed, 7])
     fingertips, pads = {}, {}
     for b, fname in zip(tips, names):
-        point, normal, pad = _pad_contact(model, data, b, rng)
+        point, normal, pad = _pad_contact(model, data, b, signs, rng)
         link = model.body(b).name
         fingertips[fname] = Fingertip(link=link, point=tuple(point), normal=tuple(normal),
                                       sphere=_contact_sphere(spheres.get(link, np.zeros((0, 4))), point, normal))
@@ -280,15 +308,14 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     if palm == 0:
         palm = 1
     Rp, tp = data.xmat[palm].reshape(3, 3), data.xpos[palm]
-    rest = [v for k, v in pads.items() if k != thumb] or list(pads.values())
-    approach = Rp.T @ np.mean(rest, axis=0)
-    approach /= np.linalg.norm(approach)
     palm_shapes = link_shapes(model, palm)
     if palm_shapes:
         pp, _ = sample_link_surface(palm_shapes, 3000, rng)
     else:
         pp = np.zeros((1, 3))
     centre = pp.mean(axis=0)
+    approach = Rp.T @ _approach(data, model, fingertips, pads, thumb, Rp @ centre + tp)
+    approach /= np.linalg.norm(approach)
     height = np.percentile((pp - centre) @ approach, 98) if len(pp) > 1 else 0.0
     origin = centre + height * approach
     thumb_axis = _thumb_axis(model, data, palm, origin, approach, fingertips, thumb)

@@ -8,7 +8,7 @@ report, each finding naming the link, joint or finger, the reason and the remedy
   surface's outward normal, and it faces the side the finger closes towards;
 - couplings: those the MJCF implies (tight tendons, joint equalities, URDF mimic joints:
   `mjcf.detect_couplings`) are in the spec; every joint is driven by an actuator or a coupling;
-- palm and self-collision: the palm's approach points where the fingers close; no listed
+- palm and self-collision: the fingers, half-closed, lie in front of the palm; no listed
   self-collision pair overlaps in the open pose (it would always count as penetrating).
 
 Errors make a spec unusable for synthesis (``hand check`` exits 2); warnings are worth a look.
@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 import torch
 
+from .closing import closing_signs, link_centre
 from .geometry import link_shapes, points_outward, sample_link_surface, union_depth
 from .mjcf import detect_couplings
 from .spheres import sphere_coverage
@@ -102,19 +103,25 @@ def _spheres(hand, rng, lim: Limits) -> list[Finding]:
     return out
 
 
-def _closing_direction(m, data, body: int, point: np.ndarray) -> np.ndarray | None:
-    """World direction the point of ``body`` moves when its nearest joint flexes (towards the side
-    of its range that is larger in magnitude), or None without a joint above it."""
+def _closing_signs(hand, data) -> dict[str, float]:
+    """Joint name -> the way it closes (`closing.closing_signs`, as `hand init` derives it)."""
+    m = hand.mj_model
+    tips = [m.body(t.link).id for t in hand.spec.fingertips.values()]
+    signs = closing_signs(m, data, tips, [link_centre(data, b, link_shapes(m, b)) for b in tips])
+    return {m.joint(j).name: float(signs[j]) for j in range(m.njnt)}
+
+
+def _closing_direction(m, data, body: int, point: np.ndarray, signs: dict[str, float]) -> np.ndarray | None:
+    """World direction the point of ``body`` moves when its nearest joint closes, or None without
+    a joint above it."""
     b = body
     while b != 0 and m.body_jntnum[b] == 0:
         b = int(m.body_parentid[b])
     if b == 0:
         return None
     j = int(m.body_jntadr[b] + m.body_jntnum[b] - 1)
-    lo, hi = m.jnt_range[j] if m.jnt_limited[j] else (-1.0, 1.0)
-    sign = 1.0 if abs(hi) >= abs(lo) else -1.0
     R, t = data.xmat[body].reshape(3, 3), data.xpos[body]
-    return sign * np.cross(data.xaxis[j], R @ point + t - data.xanchor[j])
+    return signs[m.joint(j).name] * np.cross(data.xaxis[j], R @ point + t - data.xanchor[j])
 
 
 def _fingertips(hand, rng, lim: Limits) -> list[Finding]:
@@ -122,6 +129,7 @@ def _fingertips(hand, rng, lim: Limits) -> list[Finding]:
     data = mujoco.MjData(m)
     data.qpos[:] = hand.joints_to_qpos(hand.open_pose)
     mujoco.mj_kinematics(m, data)
+    signs = _closing_signs(hand, data)
     for fname, tip in spec.fingertips.items():
         where = f"fingertip {fname!r} (link {tip.link!r})"
         b = m.body(tip.link).id
@@ -143,7 +151,7 @@ def _fingertips(hand, rng, lim: Limits) -> list[Finding]:
         if not points_outward(shapes, p, n, lim.pad_probe_m):
             out.append(Finding("error", where, "the normal does not point out of the link's collision surface",
                                "set it to the pad's outward normal"))
-        closing = _closing_direction(m, data, b, p)
+        closing = _closing_direction(m, data, b, p, signs)
         R = data.xmat[b].reshape(3, 3)
         if closing is not None and np.linalg.norm(closing) > 1e-9 and float((R @ n) @ closing) < 0:
             out.append(Finding("warning", where, "the pad faces away from where the finger closes (the back of the "
@@ -179,10 +187,17 @@ def _palm_and_pairs(hand) -> list[Finding]:
     root = torch.tensor([0, 0, 0, 1.0, 0, 0, 0], dtype=hand.dtype, device=hand.device)
     q0 = hand.open_pose
     lo, hi = hand.joint_lower, hand.joint_upper
-    flexed = hand.apply_couplings(torch.where(hi.abs() >= lo.abs(), hi, lo) * 0.5 + q0 * 0.5)
+    data = mujoco.MjData(hand.mj_model)
+    data.qpos[:] = hand.joints_to_qpos(q0)
+    mujoco.mj_kinematics(hand.mj_model, data)
+    signs = _closing_signs(hand, data)
+    up = torch.tensor([signs[n] > 0 for n in hand.joint_names], device=lo.device)
+    flexed = hand.apply_couplings(torch.where(up, hi, lo) * 0.5 + q0 * 0.5)
     palm = hand.palm_frame(root, q0)
-    move = (hand.fingertip_points(root, flexed) - hand.fingertip_points(root, q0)).mean(0)
-    if float(move @ palm.approach) <= 0:
+    # where the fingers close: their pads half-closed lie in front of the palm (a flat hand's
+    # pads move along the approach as they close; a claw's, pointing along it, move back a little)
+    grasp = hand.fingertip_points(root, flexed).mean(0) - palm.origin
+    if float(grasp @ palm.approach) <= 0:
         out.append(Finding("error", "palm", "the approach axis points away from where the fingers close",
                            "flip palm.approach (it is the palm normal, out of the palm)"))
     pen = hand.self_penetration(root, q0)

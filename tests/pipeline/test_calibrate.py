@@ -92,3 +92,23 @@ def test_calibrate_leaves_a_worse_start_for_the_better_candidate(tiny_calibratio
     worse, better = result.candidates
     assert better.successes > 0 and better.penetration_p90_m <= MAX_PENETRATION_P90_M
     assert result.chosen is better and load_spec(spec).sphere_margin_m == 0.0008
+
+
+def test_the_calibration_sees_every_grasp_type_of_the_default_job():
+    """The default job's objects (manifests/real_dev.jsonl's scales) get fingertip grasps up to
+    0.09 m and power grasps above (the dataset preset's bands): the calibration's scales give
+    both, so a margin whose power grasps press in (the D'Claw's phalanges) is measured too."""
+    import json
+    from pathlib import Path
+
+    from datagen.pipeline import resolve
+    from datagen.pipeline.calibrate import CALIBRATION_SCALES
+
+    mix = resolve("shadow", "force_closure").grasp_types
+    manifest = Path(__file__).resolve().parents[2] / "manifests" / "real_dev.jsonl"
+    job = {s for line in manifest.read_text().splitlines() if line.strip() for s in json.loads(line)["scales"]}
+
+    def types(scales):
+        return {t for s in scales for t in mix.counts(s, 10)}
+
+    assert types(job) == {"precision", "power"} and types(CALIBRATION_SCALES) == types(job)
