@@ -123,6 +123,9 @@ def main(argv=None) -> int:
         cpu_peer = peer(checkout, args.peer_python, ph, save_root)
         cpu_fixed = peer(checkout, args.peer_python, ph, save_root)  # every file done: its fixed cost
         theirs = peer_verdicts(save_root, ph)
+        if len(theirs) < len(files):  # e.g. its hand's meshes missing: it logs each file and goes on
+            raise SystemExit(f"{hand}: the peer evaluated {len(theirs)} of {len(files)} grasps; its log: "
+                             f"{save_root / f'datagen_{ph}' / 'log'}")
         pairs = [(mine[g], theirs[k]) for k, g in files.items() if k in theirs and g in mine]
         agree = sum(a["succ"] == b for a, b in pairs)
         n = len(pairs)
