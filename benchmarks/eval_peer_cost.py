@@ -12,7 +12,8 @@ with ``graspdata/``). Per hand, in this order:
    are copied to ``WORK/<hand>/datagen_<peer hand>/graspdata``;
 2. this project's evaluator (default `EvalConfig`: the hand's protocol, the early pass) on the
    same rows in this process, one torch thread: CPU seconds (process time) over the grasps,
-   scenes built on the way included;
+   scenes built on the way included, the imports before the clock (a fixed cost, as the peer's
+   is below);
 3. the peer, its code unchanged (``python src/main.py hand=<h> task=eval exp_name=datagen
    save_root=WORK/<hand> n_worker=1``): CPU seconds of the process and its children
    (``RUSAGE_CHILDREN``); then the same command again, every file now evaluated (it skips them):
@@ -66,6 +67,7 @@ def ours(job: Path, hand_name: str, ids: set[str]) -> tuple[dict[str, dict], flo
     from datagen.eval import EvalConfig, Evaluator
     from datagen.eval.table import row_pieces, row_poses
     from datagen.hands import load_hand
+    from datagen.objects import load_processed  # noqa: F401 (row_pieces' imports: trimesh, ~1 s, once)
 
     torch.set_num_threads(1)
     rows = [r for f in sorted((job / "shards").glob("part-*.parquet")) for r in pq.read_table(f).to_pylist()
@@ -121,6 +123,9 @@ def main(argv=None) -> int:
         cpu_peer = peer(checkout, args.peer_python, ph, save_root)
         cpu_fixed = peer(checkout, args.peer_python, ph, save_root)  # every file done: its fixed cost
         theirs = peer_verdicts(save_root, ph)
+        if len(theirs) < len(files):  # e.g. its hand's meshes missing: it logs each file and goes on
+            raise SystemExit(f"{hand}: the peer evaluated {len(theirs)} of {len(files)} grasps; its log: "
+                             f"{save_root / f'datagen_{ph}' / 'log'}")
         pairs = [(mine[g], theirs[k]) for k, g in files.items() if k in theirs and g in mine]
         agree = sum(a["succ"] == b for a, b in pairs)
         n = len(pairs)

@@ -185,7 +185,7 @@ class Evaluator:
         if key in self._scenes:
             self._scenes.move_to_end(key)
             return self._scenes[key]
-        scene = build_scene(self.hand, pieces, self.cfg, task, table=table)
+        scene = build_scene(self.hand, pieces, self.cfg, task, table=table, visual=False)
         log.debug("scene of %s: %d pieces at scale %.3f m, joint %s (%d scenes cached)",
                   pieces.object_id, len(pieces.paths), pieces.scale, joint[0] if joint else "free", len(self._scenes) + 1)
         datas = [mujoco.MjData(scene.model) for _ in range(len(DIRECTIONS) + 2)]

@@ -108,11 +108,12 @@ def self_pairs(scene: Scene) -> np.ndarray:
 def self_penetration(scene: Scene, data: mujoco.MjData) -> float:
     """Max self-penetration depth (m, >= 0) of the hand at the pose in ``data``."""
     m = scene.model
+    pairs = self_pairs(scene)
+    a, b = pairs[:, 0], pairs[:, 1]
+    # pairs whose bounding spheres overlap (a margin above 0: a pair more is one more exact query)
+    gap = np.linalg.norm(data.geom_xpos[a] - data.geom_xpos[b], axis=1) - m.geom_rbound[a] - m.geom_rbound[b]
     depth = 0.0
-    for ga, gb in self_pairs(scene):
-        gap = np.linalg.norm(data.geom_xpos[ga] - data.geom_xpos[gb]) - m.geom_rbound[ga] - m.geom_rbound[gb]
-        if gap >= 0:
-            continue
+    for ga, gb in pairs[gap < 1e-9]:
         d = mujoco.mj_geomDistance(m, data, int(ga), int(gb), 0.0, None)
         depth = max(depth, -d)
     return depth

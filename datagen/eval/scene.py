@@ -144,14 +144,18 @@ def _set_contact(geom, cfg: EvalConfig, hand: bool) -> None:
 
 
 def build_scene(hand, pieces: ObjectPieces, cfg: EvalConfig, task: TaskTest | None = None,
-                table=None) -> Scene:
+                table=None, *, visual: bool = True) -> Scene:
     """Compile the scene of ``hand`` (a `HandModel`) and ``pieces``; ``task`` selects the
     object's joint (None: free); ``table`` (4,) ``[n, d]``: the support plane of a tabletop row
-    (None: no table). Raises `EvalError` if MuJoCo rejects the model."""
+    (None: no table). ``visual`` False leaves out the hand's visual geoms (neither contype nor
+    conaffinity) of bodies with an explicit inertial, where they change no mass, and the meshes
+    only they use: the same dynamics (benchmarks/results/eval.md), without compiling LEAP's
+    120k-vertex visual meshes in every scene (the evaluator's scenes; a render keeps them).
+    Raises `EvalError` if MuJoCo rejects the model."""
     spec = mujoco.MjSpec()
     _set_options(spec.option, cfg)
     spec.compiler.degree = False
-    palm = _attach_hand(spec, hand, cfg)
+    palm = _attach_hand(spec, hand, cfg, visual)
     _set_hand_physics(spec, hand, cfg)
     body = _add_object_body(spec, task)
     if task is not None and task.scenery:
@@ -183,11 +187,14 @@ def _set_options(opt, cfg: EvalConfig) -> None:
         opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
 
 
-def _attach_hand(spec: mujoco.MjSpec, hand, cfg: EvalConfig) -> "_PalmKinematics | None":
+def _attach_hand(spec: mujoco.MjSpec, hand, cfg: EvalConfig, visual: bool = True) -> "_PalmKinematics | None":
     """The hand under a free ``hand_base`` body welded to the ``hand_mocap`` body: the whole hand
     (``hand_root`` spec) or the palm's subtree without the wrist joints and their actuators,
-    tendons and sensors (``hand_root`` palm; returned, None for the whole hand)."""
+    tendons and sensors (``hand_root`` palm; returned, None for the whole hand). ``visual``:
+    see `build_scene`."""
     hand_spec = mujoco.MjSpec.from_file(str(hand.mjcf_path))
+    if not visual:
+        _drop_visuals(hand_spec)
     palm = _PalmKinematics(hand) if cfg.hand_root == "palm" else None
     if palm is not None and palm.palm == hand.spec.root_body:
         palm = None  # rooted at the palm already (no wrist): the same scene as hand_root spec
@@ -214,6 +221,16 @@ def _attach_hand(spec: mujoco.MjSpec, hand, cfg: EvalConfig) -> "_PalmKinematics
     weld.data[:12] = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0]
     weld.solref = list(cfg.weld_solref)
     return palm
+
+
+def _drop_visuals(spec: mujoco.MjSpec) -> None:
+    """Delete the visual geoms (no contype, no conaffinity) of bodies with an explicit inertial
+    (their mass and inertia are the inertial's, not the geoms') and the meshes no geom uses then."""
+    for g in [g for g in spec.geoms if not (g.contype or g.conaffinity) and g.parent.explicitinertial]:
+        spec.delete(g)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for m in [m for m in spec.meshes if m.name not in used]:
+        spec.delete(m)
 
 
 def _drop_wrist(spec: mujoco.MjSpec, body, palm: "_PalmKinematics") -> None:

@@ -236,3 +236,32 @@ def test_one_contact_per_geom_pair_as_in_the_peers_mujoco(shadow, good):
         per_pair[multiccd] = {p: pairs.count(p) for p in pairs}
     assert per_pair[False] and set(per_pair[False].values()) == {1}
     assert max(per_pair[True].values()) > 1
+
+
+def test_scene_without_visual_geoms_simulates_the_same(shadow, good, partial):
+    """The evaluator's scenes leave out the visual geoms of bodies with an explicit inertial
+    (`build_scene(visual=False)`); against the full scene (the reference): the same masses and
+    inertias, no collision geom lost, and the same closing and six holds bit for bit."""
+    from datagen.eval.evaluate import six_direction_wrenches
+    from datagen.eval.hold import close_hand, hold, initial_state
+    from datagen.eval.scene import build_scene
+
+    cfg = EvalConfig(stop_at_first_failure=False, settle_checks=0)
+    for pieces, poses in (good, partial):
+        out = []
+        for visual in (True, False):
+            scene = build_scene(shadow, pieces, cfg, visual=visual)
+            m = scene.model
+            out.append((m.ngeom, [m.body_mass.copy(), m.body_inertia.copy(), m.body_ipos.copy()],
+                        len(scene.hand_geoms), scene.model.nmeshvert))
+            data = mujoco.MjData(m)
+            initial_state(scene, data, poses[0])
+            pos0, quat0 = data.xpos[scene.object_body].copy(), data.xquat[scene.object_body].copy()
+            close_hand(scene, data, poses, cfg)
+            datas = [mujoco.MjData(m) for _ in range(6)]
+            dirs = hold(scene, data, six_direction_wrenches(cfg, scene.object_mass), datas, pos0, quat0, cfg)
+            out[-1] += (data.qpos.tobytes(), [d.qpos.tobytes() for d in datas], dirs)
+        full, lean = out
+        assert lean[0] < full[0] and lean[3] < full[3]  # fewer geoms and mesh vertices compiled
+        assert all((a == b).all() for a, b in zip(full[1], lean[1])) and full[2] == lean[2]
+        assert full[4:] == lean[4:]
