@@ -224,9 +224,12 @@ def _attach_hand(spec: mujoco.MjSpec, hand, cfg: EvalConfig, visual: bool = True
 
 
 def _drop_visuals(spec: mujoco.MjSpec) -> None:
-    """Delete the visual geoms (no contype, no conaffinity) of bodies with an explicit inertial
-    (their mass and inertia are the inertial's, not the geoms') and the meshes no geom uses then."""
-    for g in [g for g in spec.geoms if not (g.contype or g.conaffinity) and g.parent.explicitinertial]:
+    """Delete the visual geoms (no contype, no conaffinity, in no explicit contact pair) of bodies
+    with an explicit inertial (their mass and inertia are the inertial's, not the geoms') and the
+    meshes no geom uses then."""
+    paired = {n for p in spec.pairs for n in (p.geomname1, p.geomname2)}
+    for g in [g for g in spec.geoms if not (g.contype or g.conaffinity) and g.parent.explicitinertial
+              and g.name not in paired]:
         spec.delete(g)
     used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
     for m in [m for m in spec.meshes if m.name not in used]:

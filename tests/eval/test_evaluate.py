@@ -265,3 +265,24 @@ def test_scene_without_visual_geoms_simulates_the_same(shadow, good, partial):
         assert lean[0] < full[0] and lean[3] < full[3]  # fewer geoms and mesh vertices compiled
         assert all((a == b).all() for a, b in zip(full[1], lean[1])) and full[2] == lean[2]
         assert full[4:] == lean[4:]
+
+
+def test_drop_visuals_keeps_geoms_named_by_a_contact_pair():
+    """A geom with contype = conaffinity = 0 still collides through an explicit <pair>: the
+    evaluator's scene keeps it (hand-built MJCF; MuJoCo's compiled model is the reference)."""
+    from datagen.eval.scene import _drop_visuals
+
+    xml = """<mujoco><worldbody>
+      <body name="a"><inertial pos="0 0 0" mass="0.1" diaginertia="1e-5 1e-5 1e-5"/>
+        <geom name="a_vis" type="sphere" size="0.01" contype="0" conaffinity="0"/>
+        <geom name="a_pair" type="sphere" size="0.01" contype="0" conaffinity="0"/>
+        <geom name="a_col" type="sphere" size="0.01"/></body>
+      <body name="b" pos="0.1 0 0"><inertial pos="0 0 0" mass="0.1" diaginertia="1e-5 1e-5 1e-5"/>
+        <geom name="b_col" type="sphere" size="0.01"/></body>
+    </worldbody><contact><pair geom1="a_pair" geom2="b_col"/></contact></mujoco>"""
+    spec = mujoco.MjSpec.from_string(xml)
+    _drop_visuals(spec)
+    model = spec.compile()
+    names = {model.geom(i).name for i in range(model.ngeom)}
+    assert names == {"a_pair", "a_col", "b_col"}
+    assert model.npair == 1
