@@ -13,7 +13,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-__all__ = ["SYMMETRIC_RANGE", "closing_signs", "link_centre"]
+__all__ = ["SYMMETRIC_RANGE", "ancestors", "closing_signs", "link_centre"]
 
 SYMMETRIC_RANGE = 0.1  # |hi| and |lo| within this fraction of the larger: the range does not say
 
@@ -29,14 +29,13 @@ def link_centre(data: mujoco.MjData, body: int, shapes) -> np.ndarray:
     return data.xpos[body] + data.xmat[body].reshape(3, 3) @ local
 
 
-def _below(model: mujoco.MjModel, joint: int, body: int) -> bool:
-    """Whether ``body`` is the joint's body or one of its descendants."""
-    top = int(model.jnt_bodyid[joint])
-    while body > 0:
-        if body == top:
-            return True
+def ancestors(model: mujoco.MjModel, body: int) -> list[int]:
+    """``[body, its parent, ..., 0 (the world)]``."""
+    out = [body]
+    while body != 0:
         body = int(model.body_parentid[body])
-    return False
+        out.append(body)
+    return out
 
 
 def closing_signs(model: mujoco.MjModel, data: mujoco.MjData, tips: list[int],
@@ -60,7 +59,7 @@ def closing_signs(model: mujoco.MjModel, data: mujoco.MjData, tips: list[int],
             continue
         inward = 0.0
         for b, p in zip(tips, pts):
-            if _below(model, j, b):
+            if int(model.jnt_bodyid[j]) in ancestors(model, b):
                 if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
                     move = np.cross(data.xaxis[j], p - data.xanchor[j])
                 else:

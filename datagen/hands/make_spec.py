@@ -33,7 +33,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .closing import closing_signs, link_centre
+from .closing import ancestors, closing_signs, link_centre
 from .geometry import collision_links, link_shapes, points_outward, sample_link_surface, union_depth
 from .mjcf import FlatHand, detect_couplings, flatten_hand, resolve_asset
 from .spec import (AssetRef, Fingertip, HandSpec, HandSpecError, PalmFrame, SelfCollisionPair,
@@ -44,14 +44,6 @@ __all__ = ["propose_spec", "main"]
 
 PAD_FACE_DEPTH_M = 0.001  # a fingertip's pad face: its surface within this of the most padward point
 FACING_THUMB_DEG = 30.0   # the fingers' mean pad direction leaning more towards the thumb: not the palm's normal
-
-
-def _ancestors(model: mujoco.MjModel, body: int) -> list[int]:
-    out = [body]
-    while body != 0:
-        body = int(model.body_parentid[body])
-        out.append(body)
-    return out  # body, parent, ..., world
 
 
 def _open_pose(model: mujoco.MjModel, couplings) -> np.ndarray:
@@ -73,7 +65,7 @@ def _fingertip_links(model: mujoco.MjModel, with_geometry: set[int]) -> list[int
     for b in range(1, model.nbody):
         if children[b]:
             continue
-        hit = next((a for a in _ancestors(model, b) if a in with_geometry), None)
+        hit = next((a for a in ancestors(model, b) if a in with_geometry), None)
         if hit is not None and hit not in tips and hit != 1:
             tips.append(hit)
     return tips
@@ -121,7 +113,7 @@ def _contact_sphere(spheres: np.ndarray, point: np.ndarray, normal: np.ndarray) 
 def _pad_contact(model, data, body: int, signs: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contact point, its outward normal (link frame) and the pad direction (world) of a fingertip;
     ``signs`` (njnt,): the way each joint closes (`closing.closing_signs`)."""
-    joint_body = next(a for a in _ancestors(model, body) if model.body_jntnum[a] > 0)
+    joint_body = next(a for a in ancestors(model, body) if model.body_jntnum[a] > 0)
     j = int(model.body_jntadr[joint_body] + model.body_jntnum[joint_body] - 1)
     closing = float(signs[j])
     shapes = link_shapes(model, body)
@@ -185,7 +177,7 @@ def _thumb_axis(model, data, palm: int, origin: np.ndarray, approach: np.ndarray
         v = Rp.T @ (data.xpos[body] + data.xmat[body].reshape(3, 3) @ point - tp) - origin
         return v - (v @ approach) * approach  # projected onto the palm's plane
 
-    chain = _ancestors(model, model.body(fingertips[thumb].link).id)
+    chain = ancestors(model, model.body(fingertips[thumb].link).id)
     side = in_palm(chain[chain.index(palm) - 1])  # the first body below the palm on the thumb's chain
     tip = in_palm(model.body(fingertips[thumb].link).id, np.asarray(fingertips[thumb].point))
     others = [in_palm(model.body(t.link).id, np.asarray(t.point)) for k, t in fingertips.items() if k != thumb]
@@ -301,10 +293,10 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
         raise HandSpecError(source, f"thumb {thumb!r} is not one of the fingers {names}")
 
     # palm: deepest common ancestor of the fingertips
-    common = set(_ancestors(model, tips[0]))
+    common = set(ancestors(model, tips[0]))
     for b in tips[1:]:
-        common &= set(_ancestors(model, b))
-    palm = max(common, key=lambda a: len(_ancestors(model, a)))
+        common &= set(ancestors(model, b))
+    palm = max(common, key=lambda a: len(ancestors(model, a)))
     if palm == 0:
         palm = 1
     Rp, tp = data.xmat[palm].reshape(3, 3), data.xpos[palm]
