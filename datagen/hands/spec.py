@@ -235,81 +235,17 @@ class HandSpec:
     def from_dict(cls, data: Mapping[str, Any], source_file: str | Path | None = None) -> "HandSpec":
         """Build and validate a spec from its YAML mapping; errors name ``source_file``."""
         p = None if source_file is None else str(source_file)
-        if not isinstance(data, Mapping):
-            raise HandSpecError(p, "a hand spec must be a YAML mapping")
-        version = data.get("version", SPEC_VERSION)
-        if version != SPEC_VERSION:
-            raise HandSpecError(p, f"spec version {version!r} is not supported (expected {SPEC_VERSION})")
-        known = {"version", "name", "mjcf", "root_body", "spheres", "fingertips", "palm", "open_pose",
-                 "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp", "sphere_margin_m", "thumb_finger"}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise HandSpecError(p, f"unknown keys {unknown}", f"allowed keys: {sorted(known)}")
-        for key in ("name", "mjcf", "root_body", "spheres", "fingertips", "palm"):
-            if key not in data:
-                raise HandSpecError(p, f"missing required key {key!r}")
+        _check_keys(data, p)
         try:
-            mj = data["mjcf"]
-            if isinstance(mj, str):
-                mjcf = AssetRef(path=mj)
-            elif isinstance(mj, Mapping):
-                extra = sorted(set(mj) - {"path", "package", "sha256"})
-                if extra:
-                    raise HandSpecError(p, f"mjcf: unknown keys {extra}", "allowed: path, package, sha256")
-                mjcf = AssetRef(path=str(mj.get("path", "")), package=str(mj.get("package", "") or ""),
-                                sha256=str(mj.get("sha256", "") or ""))
-            else:
-                raise HandSpecError(p, "mjcf must be a path or a mapping {package, path}")
-            if not isinstance(data["spheres"], Mapping):
-                raise HandSpecError(p, "spheres must map link names to lists of [x, y, z, r]")
-            spheres = {
-                str(link): tuple(_vec(s, 4, f"sphere on link {link!r}", p) for s in (items or ()))
-                for link, items in data["spheres"].items()
-            }
-            if not isinstance(data["fingertips"], Mapping):
-                raise HandSpecError(p, "fingertips must map finger names to {link, point, normal}")
-            tips = {}
-            for fname, tip in data["fingertips"].items():
-                if not isinstance(tip, Mapping) or "link" not in tip or "point" not in tip:
-                    raise HandSpecError(p, f"fingertip {fname!r} needs link, point and normal")
-                tips[str(fname)] = Fingertip(
-                    link=str(tip["link"]),
-                    point=_vec(tip["point"], 3, f"fingertips.{fname}.point", p),
-                    normal=_unit(tip.get("normal"), f"fingertips.{fname}.normal", p),
-                    sphere=None if tip.get("sphere") is None else int(tip["sphere"]),
-                )
-            palm_d = data["palm"]
-            if not isinstance(palm_d, Mapping):
-                raise HandSpecError(p, "palm must be a mapping {link, origin, approach, thumb}")
-            palm = PalmFrame(
-                link=str(palm_d.get("link", "")),
-                origin=_vec(palm_d.get("origin"), 3, "palm.origin", p),
-                approach=_unit(palm_d.get("approach"), "palm.approach", p),
-                thumb=_unit(palm_d.get("thumb"), "palm.thumb", p),
-            )
-            couplings = tuple(
-                Coupling(joint=str(c["joint"]), leader=str(c["leader"]), ratio=float(c["ratio"]),
-                         offset=float(c.get("offset", 0.0)))
-                for c in (data.get("couplings") or ())
-            )
-            pairs = []
-            for pair in data.get("self_collision_pairs") or ():
-                if isinstance(pair, Mapping) and len(pair.get("links", ())) == 2:
-                    pairs.append(SelfCollisionPair(
-                        str(pair["links"][0]), str(pair["links"][1]),
-                        tuple(int(i) for i in pair.get("spheres_a") or ()),
-                        tuple(int(i) for i in pair.get("spheres_b") or ())))
-                elif isinstance(pair, (list, tuple)) and len(pair) == 2:
-                    pairs.append(SelfCollisionPair(str(pair[0]), str(pair[1])))
-                else:
-                    raise HandSpecError(p, "self_collision_pairs entries are [link, link] or "
-                                        f"{{links: [a, b], spheres_a: [...], spheres_b: [...]}}, got {pair!r}")
-            fit = SphereFitConfig.from_dict(data.get("sphere_fit"), "sphere_fit")
-            open_pose = {str(k): float(v) for k, v in (data.get("open_pose") or {}).items()}
+            mjcf, spheres = _asset_ref(data["mjcf"], p), _spheres(data["spheres"], p)
+            tips = _fingertips(data["fingertips"], p)
+            palm, couplings = _palm(data["palm"], p), _couplings(data.get("couplings"))
+            pairs = _pairs(data.get("self_collision_pairs"), p)
             return cls(
                 name=str(data["name"]), mjcf=mjcf, root_body=str(data["root_body"]), spheres=spheres,
-                fingertips=tips, palm=palm, open_pose=open_pose, couplings=couplings,
-                self_collision_pairs=tuple(pairs), sphere_fit=fit,
+                fingertips=tips, palm=palm, couplings=couplings, self_collision_pairs=pairs,
+                sphere_fit=SphereFitConfig.from_dict(data.get("sphere_fit"), "sphere_fit"),
+                open_pose={str(k): float(v) for k, v in (data.get("open_pose") or {}).items()},
                 position_actuator_kp=float(data.get("position_actuator_kp", 5.0)),
                 sphere_margin_m=float(data.get("sphere_margin_m", 0.0015)),
                 thumb_finger=_thumb_finger(data, tips), source_file=p,
@@ -406,3 +342,93 @@ def dump_spec(spec: HandSpec, path: str | Path, header: str = "") -> None:
     text = yaml.dump(spec.to_dict(), Dumper=_FlowListDumper, sort_keys=False, width=120)
     comments = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
     atomic_write_text(path, comments + text)
+
+
+_SPEC_KEYS = {"version", "name", "mjcf", "root_body", "spheres", "fingertips", "palm", "open_pose",
+              "couplings", "self_collision_pairs", "sphere_fit", "position_actuator_kp", "sphere_margin_m",
+              "thumb_finger"}
+
+
+def _check_keys(data: Any, p: str | None) -> None:
+    """A spec is a mapping of this version with the required keys and no unknown one."""
+    if not isinstance(data, Mapping):
+        raise HandSpecError(p, "a hand spec must be a YAML mapping")
+    version = data.get("version", SPEC_VERSION)
+    if version != SPEC_VERSION:
+        raise HandSpecError(p, f"spec version {version!r} is not supported (expected {SPEC_VERSION})")
+    unknown = sorted(set(data) - _SPEC_KEYS)
+    if unknown:
+        raise HandSpecError(p, f"unknown keys {unknown}", f"allowed keys: {sorted(_SPEC_KEYS)}")
+    for key in ("name", "mjcf", "root_body", "spheres", "fingertips", "palm"):
+        if key not in data:
+            raise HandSpecError(p, f"missing required key {key!r}")
+
+
+def _asset_ref(mj: Any, p: str | None) -> AssetRef:
+    """``mjcf:`` as a path or a mapping {path, package, sha256}."""
+    if isinstance(mj, str):
+        return AssetRef(path=mj)
+    if not isinstance(mj, Mapping):
+        raise HandSpecError(p, "mjcf must be a path or a mapping {package, path}")
+    extra = sorted(set(mj) - {"path", "package", "sha256"})
+    if extra:
+        raise HandSpecError(p, f"mjcf: unknown keys {extra}", "allowed: path, package, sha256")
+    return AssetRef(path=str(mj.get("path", "")), package=str(mj.get("package", "") or ""),
+                    sha256=str(mj.get("sha256", "") or ""))
+
+
+def _spheres(data: Any, p: str | None) -> dict[str, tuple]:
+    """``spheres:``: link name -> tuple of [x, y, z, r] (link frame, metres)."""
+    if not isinstance(data, Mapping):
+        raise HandSpecError(p, "spheres must map link names to lists of [x, y, z, r]")
+    return {str(link): tuple(_vec(s, 4, f"sphere on link {link!r}", p) for s in (items or ()))
+            for link, items in data.items()}
+
+
+def _fingertips(data: Any, p: str | None) -> dict[str, "Fingertip"]:
+    """``fingertips:``: finger name -> {link, point, normal, sphere}."""
+    if not isinstance(data, Mapping):
+        raise HandSpecError(p, "fingertips must map finger names to {link, point, normal}")
+    tips = {}
+    for fname, tip in data.items():
+        if not isinstance(tip, Mapping) or "link" not in tip or "point" not in tip:
+            raise HandSpecError(p, f"fingertip {fname!r} needs link, point and normal")
+        tips[str(fname)] = Fingertip(
+            link=str(tip["link"]),
+            point=_vec(tip["point"], 3, f"fingertips.{fname}.point", p),
+            normal=_unit(tip.get("normal"), f"fingertips.{fname}.normal", p),
+            sphere=None if tip.get("sphere") is None else int(tip["sphere"]),
+        )
+    return tips
+
+
+def _palm(data: Any, p: str | None) -> "PalmFrame":
+    """``palm:`` {link, origin, approach, thumb}; the two directions normalised."""
+    if not isinstance(data, Mapping):
+        raise HandSpecError(p, "palm must be a mapping {link, origin, approach, thumb}")
+    return PalmFrame(link=str(data.get("link", "")), origin=_vec(data.get("origin"), 3, "palm.origin", p),
+                     approach=_unit(data.get("approach"), "palm.approach", p),
+                     thumb=_unit(data.get("thumb"), "palm.thumb", p))
+
+
+def _couplings(data: Any) -> tuple["Coupling", ...]:
+    """``couplings:`` [{joint, leader, ratio, offset}]."""
+    return tuple(Coupling(joint=str(c["joint"]), leader=str(c["leader"]), ratio=float(c["ratio"]),
+                          offset=float(c.get("offset", 0.0))) for c in (data or ()))
+
+
+def _pairs(data: Any, p: str | None) -> tuple["SelfCollisionPair", ...]:
+    """``self_collision_pairs:`` entries [link, link] or {links, spheres_a, spheres_b}."""
+    pairs = []
+    for pair in data or ():
+        if isinstance(pair, Mapping) and len(pair.get("links", ())) == 2:
+            pairs.append(SelfCollisionPair(
+                str(pair["links"][0]), str(pair["links"][1]),
+                tuple(int(i) for i in pair.get("spheres_a") or ()),
+                tuple(int(i) for i in pair.get("spheres_b") or ())))
+        elif isinstance(pair, (list, tuple)) and len(pair) == 2:
+            pairs.append(SelfCollisionPair(str(pair[0]), str(pair[1])))
+        else:
+            raise HandSpecError(p, "self_collision_pairs entries are [link, link] or "
+                                f"{{links: [a, b], spheres_a: [...], spheres_b: [...]}}, got {pair!r}")
+    return tuple(pairs)
