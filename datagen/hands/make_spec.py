@@ -255,11 +255,28 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
     mujoco.mj_kinematics(model, data)
 
     links = collision_links(model)
-    spheres: dict[str, np.ndarray] = {}
-    for b in links:
-        rng = np.random.default_rng([fit.seed, b])
-        spheres[model.body(b).name] = fit_link_spheres(link_shapes(model, b), fit, rng)
+    spheres = {model.body(b).name: fit_link_spheres(link_shapes(model, b), fit, np.random.default_rng([fit.seed, b]))
+               for b in links}
+    tips, names = _tip_links(model, source, links, fingers)
+    rng = np.random.default_rng([fit.seed, 7])
+    fingertips, pads = _fingertip_contacts(model, data, tips, names, spheres, rng)
+    thumb = _choose_thumb(source, pads, names, thumb)
+    palm = _palm_frame(model, data, tips, fingertips, pads, thumb, rng)
+    pairs = _self_collision_pairs(model, data, q_open, spheres, np.random.default_rng([fit.seed, 11]))
+    spec = HandSpec(
+        name=name, mjcf=asset, root_body=root_body,
+        spheres={k: tuple(tuple(float(x) for x in s) for s in v) for k, v in spheres.items() if len(v)},
+        fingertips=fingertips, palm=palm,
+        open_pose={model.joint(j).name: float(q_open[j]) for j in range(model.njnt)},
+        couplings=tuple(couplings), self_collision_pairs=tuple(pairs), sphere_fit=fit,
+        position_actuator_kp=position_kp, thumb_finger=thumb,
+    )
+    return spec, flat
 
+
+def _tip_links(model: mujoco.MjModel, source: Path, links: list[int],
+               fingers: dict[str, str] | None) -> tuple[list[int], list[str]]:
+    """The fingertip bodies and their finger names: the user's ``fingers`` or every detected tip."""
     if fingers:
         tips = []
         for link in fingers:
@@ -273,8 +290,13 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
         names = [model.body(b).name for b in tips]
     if not tips:
         raise HandSpecError(source, "no fingertip links found", "pass --finger LINK=NAME")
+    return tips, names
+
+
+def _fingertip_contacts(model: mujoco.MjModel, data: mujoco.MjData, tips: list[int], names: list[str],
+                        spheres: dict[str, np.ndarray], rng: np.random.Generator) -> tuple[dict, dict]:
+    """Each finger's pad contact (``Fingertip``, link frame) and its pad normal (world, (3,))."""
     signs = closing_signs(model, data, tips, [link_centre(data, b, link_shapes(model, b)) for b in tips])
-    rng = np.random.default_rng([fit.seed, 7])
     fingertips, pads = {}, {}
     for b, fname in zip(tips, names):
         point, normal, pad = _pad_contact(model, data, b, signs, rng)
@@ -282,6 +304,12 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
         fingertips[fname] = Fingertip(link=link, point=tuple(point), normal=tuple(normal),
                                       sphere=_contact_sphere(spheres.get(link, np.zeros((0, 4))), point, normal))
         pads[fname] = pad
+    return fingertips, pads
+
+
+def _choose_thumb(source: Path, pads: dict[str, np.ndarray], names: list[str], thumb: str | None) -> str:
+    """The user's thumb, or the finger whose pad normal is least aligned with the others' mean
+    (with fewer than three fingers: the last)."""
     if thumb is None:
         if len(pads) >= 3:
             def others_mean(f):
@@ -291,8 +319,13 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
             thumb = names[-1]
     if thumb not in pads:
         raise HandSpecError(source, f"thumb {thumb!r} is not one of the fingers {names}")
+    return thumb
 
-    # palm: deepest common ancestor of the fingertips
+
+def _palm_frame(model: mujoco.MjModel, data: mujoco.MjData, tips: list[int], fingertips: dict,
+                pads: dict, thumb: str, rng: np.random.Generator) -> PalmFrame:
+    """The palm: the fingertips' deepest common ancestor; its origin on the inner face's top 2%
+    along the approach (link frame, metres), the approach and thumb axes (unit)."""
     common = set(ancestors(model, tips[0]))
     for b in tips[1:]:
         common &= set(ancestors(model, b))
@@ -301,30 +334,15 @@ def propose_spec(source: Path, *, name: str, root_body: str, asset: AssetRef,
         palm = 1
     Rp, tp = data.xmat[palm].reshape(3, 3), data.xpos[palm]
     palm_shapes = link_shapes(model, palm)
-    if palm_shapes:
-        pp, _ = sample_link_surface(palm_shapes, 3000, rng)
-    else:
-        pp = np.zeros((1, 3))
+    pp = sample_link_surface(palm_shapes, 3000, rng)[0] if palm_shapes else np.zeros((1, 3))
     centre = pp.mean(axis=0)
     approach = Rp.T @ _approach(data, model, fingertips, pads, thumb, Rp @ centre + tp)
     approach /= np.linalg.norm(approach)
     height = np.percentile((pp - centre) @ approach, 98) if len(pp) > 1 else 0.0
     origin = centre + height * approach
     thumb_axis = _thumb_axis(model, data, palm, origin, approach, fingertips, thumb)
-
-    pairs = _self_collision_pairs(model, data, q_open, spheres, np.random.default_rng([fit.seed, 11]))
-
-    spec = HandSpec(
-        name=name, mjcf=asset, root_body=root_body,
-        spheres={k: tuple(tuple(float(x) for x in s) for s in v) for k, v in spheres.items() if len(v)},
-        fingertips=fingertips,
-        palm=PalmFrame(link=model.body(palm).name, origin=tuple(origin), approach=tuple(approach),
-                       thumb=tuple(thumb_axis)),
-        open_pose={model.joint(j).name: float(q_open[j]) for j in range(model.njnt)},
-        couplings=tuple(couplings), self_collision_pairs=tuple(pairs), sphere_fit=fit,
-        position_actuator_kp=position_kp, thumb_finger=thumb,
-    )
-    return spec, flat
+    return PalmFrame(link=model.body(palm).name, origin=tuple(origin), approach=tuple(approach),
+                     thumb=tuple(thumb_axis))
 
 
 _G = "models/grippers"
@@ -357,16 +375,8 @@ def _builtin(names: list[str], render_dir: str) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    raw = list(sys.argv[1:] if argv is None else argv)
-    if raw[:1] == ["--builtin"]:
-        which = raw[1] if len(raw) > 1 else "all"
-        render_dir = raw[raw.index("--render-dir") + 1] if "--render-dir" in raw else ""
-        names = list(BUILTIN_ARGS) if which == "all" else [which]
-        if any(n not in BUILTIN_ARGS for n in names):
-            print(f"error: built-in hands are {sorted(BUILTIN_ARGS)}", file=sys.stderr)
-            return 2
-        return _builtin(names, render_dir)
+def _parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m datagen.hands.make_spec``."""
     parser = argparse.ArgumentParser(prog="python -m datagen.hands.make_spec", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("source", help="MJCF/URDF path (relative to --package's folder when given)")
@@ -385,7 +395,20 @@ def main(argv: list[str] | None = None) -> int:
                         help="m the spheres may sink into an object in synthesis (their overshoot; HandSpec)")
     parser.add_argument("--out", required=True, help="YAML spec to write")
     parser.add_argument("--render", default="", help="PNG picture of spheres and contact points")
-    args = parser.parse_args(raw)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    raw = list(sys.argv[1:] if argv is None else argv)
+    if raw[:1] == ["--builtin"]:
+        which = raw[1] if len(raw) > 1 else "all"
+        render_dir = raw[raw.index("--render-dir") + 1] if "--render-dir" in raw else ""
+        names = list(BUILTIN_ARGS) if which == "all" else [which]
+        if any(n not in BUILTIN_ARGS for n in names):
+            print(f"error: built-in hands are {sorted(BUILTIN_ARGS)}", file=sys.stderr)
+            return 2
+        return _builtin(names, render_dir)
+    args = _parser().parse_args(raw)
 
     out = Path(args.out).resolve()
     if args.package:
