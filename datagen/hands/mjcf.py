@@ -239,13 +239,46 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
     source = Path(source).resolve()
     spec = _read_spec(source)
     undo_registry_edits(spec, source)  # a registry copy of a Menagerie hand -> Menagerie's model
-    base = source.parent
+    _absolute_asset_dirs(spec, source.parent)
+    _keep_only_hand(spec, source, root_body)
+    model = _compile(spec, source)
+    for j in range(model.njnt):
+        if int(model.jnt_type[j]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            raise HandSpecError(source, f"joint {model.joint(j).name!r} is not a hinge or slide joint",
+                                "datagen hands support 1-DoF joints only")
+    if model.nu == 0 and model.njnt > 0:
+        _add_position_servos(spec, model, position_kp)
+        if source.suffix.lower() == ".urdf":
+            for a, b in _rest_overlaps(model):
+                spec.add_exclude(bodyname1=a, bodyname2=b)
+        model = _compile(spec, source)
+    xml = spec.to_xml()
+    out = source
+    if write:
+        digest = hashlib.sha256(xml.encode()).hexdigest()[:16]
+        directory = cache_dir()
+        directory.mkdir(parents=True, exist_ok=True)
+        out = directory / f"{name}-{digest}.xml"
+        if not out.is_file():
+            atomic_write_text(out, xml, fsync=False)  # a cache: content-addressed, rebuilt if lost
+            log.debug("flattened %s -> %s", source, out)
+    return FlatHand(xml=xml, model=model, path=out, source=source)
+
+
+def _absolute_asset_dirs(spec: mujoco.MjSpec, base: Path) -> None:
+    """meshdir / texturedir made absolute (relative to the source's folder), so the flat XML
+    compiles from the cache."""
     for attr in ("meshdir", "texturedir"):
         value = getattr(spec, attr)
         if value and not os.path.isabs(value):
             setattr(spec, attr, str((base / value).resolve()))
         elif not value:
             setattr(spec, attr, str(base))
+
+
+def _keep_only_hand(spec: mujoco.MjSpec, source: Path, root_body: str) -> None:
+    """Delete everything but ``root_body``'s tree (world geoms, keys, its free joint); the root at
+    the world origin with the identity orientation."""
     root = spec.body(root_body)
     if root is None:
         tops = [b.name for b in spec.worldbody.bodies]
@@ -270,38 +303,21 @@ def flatten_hand(source: Path, root_body: str, *, name: str = "hand", position_k
     root.pos = [0.0, 0.0, 0.0]
     root.quat = [1.0, 0.0, 0.0, 0.0]
     root.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
-    model = _compile(spec, source)
+
+
+def _add_position_servos(spec: mujoco.MjSpec, model: mujoco.MjModel, position_kp: float) -> None:
+    """One position actuator per joint (gain ``position_kp``, ctrlrange = the joint's range) and
+    the stabilising armature on the lightest joints (`_servo_armature`)."""
+    light = _servo_armature(model, position_kp)
     for j in range(model.njnt):
-        if int(model.jnt_type[j]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
-            raise HandSpecError(source, f"joint {model.joint(j).name!r} is not a hinge or slide joint",
-                                "datagen hands support 1-DoF joints only")
-    if model.nu == 0 and model.njnt > 0:
-        light = _servo_armature(model, position_kp)
-        for j in range(model.njnt):
-            jn = model.joint(j)
-            lo, hi = (jn.range if model.jnt_limited[j] else (-np.pi, np.pi))
-            act = spec.add_actuator(name=f"{jn.name}_pos", target=jn.name,
-                                    trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            act.set_to_position(kp=position_kp)
-            act.ctrlrange = [float(lo), float(hi)]
-            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            if j in light:
-                spec.joint(jn.name).armature = light[j]
-        if source.suffix.lower() == ".urdf":
-            for a, b in _rest_overlaps(model):
-                spec.add_exclude(bodyname1=a, bodyname2=b)
-        model = _compile(spec, source)
-    xml = spec.to_xml()
-    out = source
-    if write:
-        digest = hashlib.sha256(xml.encode()).hexdigest()[:16]
-        directory = cache_dir()
-        directory.mkdir(parents=True, exist_ok=True)
-        out = directory / f"{name}-{digest}.xml"
-        if not out.is_file():
-            atomic_write_text(out, xml, fsync=False)  # a cache: content-addressed, rebuilt if lost
-            log.debug("flattened %s -> %s", source, out)
-    return FlatHand(xml=xml, model=model, path=out, source=source)
+        jn = model.joint(j)
+        lo, hi = (jn.range if model.jnt_limited[j] else (-np.pi, np.pi))
+        act = spec.add_actuator(name=f"{jn.name}_pos", target=jn.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=position_kp)
+        act.ctrlrange = [float(lo), float(hi)]
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        if j in light:
+            spec.joint(jn.name).armature = light[j]
 
 
 def build_chain(xml: str, root_body: str, *, dtype: torch.dtype, device: torch.device | str):
