@@ -67,15 +67,10 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
                 discard_new_job(job, remove_dir=not existed)
             raise
         slices = shard_slices(len(entries), cfg.objects_per_shard)
-        done = finished_or_redo(job, log)
-        retry = retryable_shards(job, done) if retry_failed else []
-        for i in retry:  # unfinished until rerun: readers never see old and new files mixed
-            job.ledger_path(i).unlink(missing_ok=True)
-            done.pop(i)
-        todo = [i for i in range(len(slices)) if i not in done]
+        todo, n_done, n_retried = _shards_to_run(job, len(slices), retry_failed, log)
         log(f"job {job.path}: {len(entries)} objects in {len(slices)} shards; "
-            f"{'resuming, ' if resumed else ''}{len(done)} done, {len(todo)} to run"
-            + (f" ({len(retry)} retried for failures)" if retry_failed else ""))
+            f"{'resuming, ' if resumed else ''}{n_done} done, {len(todo)} to run"
+            + (f" ({n_retried} retried for failures)" if retry_failed else ""))
         code = code_version()
         if code != doc["code_version"]:
             log(f"warning: the code changed since this job was created ({doc['code_version']} -> {code}); "
@@ -93,6 +88,19 @@ def run_job(cfg: JobConfig, out: str | Path, *, address: str | None = None, num_
         if connected:
             ray.shutdown()
         job.unlock()
+
+
+
+def _shards_to_run(job: JobDir, n_shards: int, retry_failed: bool, log) -> tuple[list[int], int, int]:
+    """(shards to run, shards done, shards retried): those without a finished ledger; with
+    ``retry_failed`` also finished ones whose failures a rerun may fix (their ledgers removed
+    first, so readers never see old and new files mixed)."""
+    done = finished_or_redo(job, log)
+    retry = retryable_shards(job, done) if retry_failed else []
+    for i in retry:
+        job.ledger_path(i).unlink(missing_ok=True)
+        done.pop(i)
+    return [i for i in range(n_shards) if i not in done], len(done), len(retry)
 
 
 def _resolve_layout(cfg: JobConfig, job: JobDir, address: str | None, num_cpus: int | None) -> tuple[JobConfig, bool]:
