@@ -53,6 +53,7 @@ class HandObjectState:
     joint_violation: torch.Tensor  # (B,) rad
     links: LinkContacts | None = None  # a grasp type's extra contact links (palm, phalanges), L of them
     link_pull: torch.Tensor | None = None  # (L,) bool: pulled onto the surface by E_dist (else GWS candidates only)
+    link_palm: torch.Tensor | None = None  # (L,) bool: the palm link among them
 
 
 @dataclass
@@ -65,12 +66,14 @@ class EnergyTerms:
     self_penetration: torch.Tensor
     joint_limits: torch.Tensor
     total: torch.Tensor
-    link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
+    link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared (or Huber) gap, m^2
+    palm_opposition: torch.Tensor | None = None  # the fingertips' opposition to the palm, in [0, 1]
 
     def as_dict(self) -> dict[str, torch.Tensor]:
         out = {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
-        if self.link_distance is not None:
-            out["link_distance"] = self.link_distance
+        for k in ("link_distance", "palm_opposition"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
         return out
 
 
@@ -122,7 +125,8 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None, pieces=None) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None, pieces=None,
+                      radius_offset: torch.Tensor | None = None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -135,11 +139,14 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
     distance term pulls; ``pieces``: the targets' convex pieces (`GraspTarget.pieces`, same
     order), each sphere's penetration the deeper of the surface's and the pieces' (None: the
-    surface's).
+    surface's); ``radius_offset`` ``(S,)`` m: subtracted from each sphere's radius against the
+    object (not against the hand itself: self-collision keeps the full spheres).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
     centres_all, radii_all = centres, radii
+    if radius_offset is not None:
+        radii = radii - radius_offset
     tips = centres[:, tip_spheres]
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
@@ -163,6 +170,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
         links=(link_contacts(hand, targets, object_index, centres, radii, links)
                if links is not None and links.numel() else None),
         link_pull=link_pull,
+        link_palm=links == hand.palm_link if links is not None else None,
     )
 
 
@@ -202,6 +210,26 @@ def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor
             torch.cat([tips, contact_bounds(state.links.gap, cfg)], 1))
 
 
+def huber(x: torch.Tensor, delta: float) -> torch.Tensor:
+    """``(...)`` m^2: ``x^2`` within ``delta`` (m) of 0, ``delta (2 |x| - delta)`` beyond (C1, its
+    slope 2 delta out there, not fading as x -> delta); ``delta = 0``: ``x^2``."""
+    if delta <= 0:
+        return x * x
+    a = x.abs()
+    return torch.where(a <= delta, x * x, delta * (2 * a - delta))
+
+
+def palm_opposition(state: HandObjectState) -> torch.Tensor | None:
+    """``(B,)`` in [0, 1]: ``(1 + n_p . mean_i n_i) / 2``, ``n_p`` the inward normal at the palm's
+    nearest object point and ``n_i`` the task fingertips' (the directions each pushes the object):
+    0 when every fingertip pushes straight against the palm, 1/2 when they push across it, 1 with
+    it. None without a palm contact."""
+    if state.links is None or state.link_palm is None or not bool(state.link_palm.any()):
+        return None
+    n_p = state.links.normals[:, state.link_palm][:, 0]  # (B, 3)
+    return 0.5 * (1.0 + (n_p * state.contact_normals.mean(1)).sum(-1))
+
+
 def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
                    task_origin: torch.Tensor | None = None) -> EnergyTerms:
     """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
@@ -230,8 +258,11 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     e_dist = ((state.tip_distance + cfg.sphere_margin_m) ** 2).sum(-1)
     e_link = e_dist.new_zeros(e_dist.shape)
     if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
-        e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
+        e_link = huber(state.links.gap[:, state.link_pull] + cfg.sphere_margin_m, cfg.link_huber_m).sum(-1)
+    e_opp = palm_opposition(state) if w.palm_opposition > 0 else None
     total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
+    if e_opp is not None:
+        total = total + w.palm_opposition * e_opp
     return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total,
-                       link_distance=e_link if state.links is not None else None)
+                       link_distance=e_link if state.links is not None else None, palm_opposition=e_opp)
