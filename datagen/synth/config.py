@@ -77,6 +77,7 @@ class SynthConfig(Config):
     #: the palm's collision spheres count this much smaller against the object (pull, penetration, contact
     #: tests), m: they overshoot the palm's collision geometry by more than the sphere margin (Shadow's inner face)
     palm_sink_m: float = 0.0
+    palm_virtual: bool = False  #: the palm counts in the GWS with bound 1 at any gap (a virtual contact the fingertips must balance)
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
     penetration_pieces: bool = False  #: penetration terms also against the object's convex pieces (what MuJoCo collides: synth/pieces.py)
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)

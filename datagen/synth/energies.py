@@ -205,9 +205,12 @@ def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor
     if state.links is None:
         return state.contact_points, state.contact_normals, None
     tips = state.contact_points.new_ones(state.contact_points.shape[:2])
+    bounds = contact_bounds(state.links.gap, cfg)
+    if cfg.palm_virtual and state.link_palm is not None:
+        bounds = torch.where(state.link_palm, torch.ones_like(bounds), bounds)
     return (torch.cat([state.contact_points, state.links.points], 1),
             torch.cat([state.contact_normals, state.links.normals], 1),
-            torch.cat([tips, contact_bounds(state.links.gap, cfg)], 1))
+            torch.cat([tips, bounds], 1))
 
 
 def huber(x: torch.Tensor, delta: float) -> torch.Tensor:
