@@ -71,13 +71,6 @@ class SynthConfig(Config):
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
-    #: the pulled links' gap term: squared (0) or a Huber form, squared within this of its target and
-    #: linear beyond, so its pull does not fade near the surface, m
-    link_huber_m: float = 0.0
-    #: the palm's collision spheres count this much smaller against the object (pull, penetration, contact
-    #: tests), m: they overshoot the palm's collision geometry by more than the sphere margin (Shadow's inner face)
-    palm_sink_m: float = 0.0
-    palm_virtual: bool = False  #: the palm counts in the GWS with bound 1 at any gap (a virtual contact the fingertips must balance)
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
     penetration_pieces: bool = False  #: penetration terms also against the object's convex pieces (what MuJoCo collides: synth/pieces.py)
     seed: int = 0  #: seed of the initial poses and wrench directions (a job: its seed + the shard index)
@@ -113,10 +106,6 @@ class SynthConfig(Config):
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")
-        if not (math.isfinite(self.link_huber_m) and 0 <= self.link_huber_m < 0.01):
-            raise ConfigError(f"SynthConfig.link_huber_m must be in [0, 0.01) m, got {self.link_huber_m}")
-        if not (math.isfinite(self.palm_sink_m) and 0 <= self.palm_sink_m < 0.005):
-            raise ConfigError(f"SynthConfig.palm_sink_m must be in [0, 0.005) m, got {self.palm_sink_m}")
         if not (math.isfinite(self.link_activation_m) and self.link_activation_m > 0):
             raise ConfigError(f"SynthConfig.link_activation_m must be a finite number > 0 m, got {self.link_activation_m}")
         if self.iters < 1 or self.num_directions < 1:

@@ -13,7 +13,10 @@
   SDF grid (exact mesh distances are kept for the few fingertip contacts), plus the same against
   a mounted task object's static scenery (`datagen.synth.scenery`);
 * ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
-* ``E_joint``: summed joint-limit violation (rad).
+* ``E_joint``: summed joint-limit violation (rad);
+* with a grasp type's palm contact (not in the paper): ``w_l E_link``, the pulled links' summed
+  squared gap (m^2), and ``w_o E_opp``, the fingertips' opposition to the palm
+  (:func:`palm_opposition`; Shadow's power grasps: their palm never carried load).
 
 The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
 touches the object, its gradient there ignores the obstacle, and a line search stalls on it
@@ -66,7 +69,7 @@ class EnergyTerms:
     self_penetration: torch.Tensor
     joint_limits: torch.Tensor
     total: torch.Tensor
-    link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared (or Huber) gap, m^2
+    link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
     palm_opposition: torch.Tensor | None = None  # the fingertips' opposition to the palm, in [0, 1]
 
     def as_dict(self) -> dict[str, torch.Tensor]:
@@ -125,8 +128,7 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
                       exact_contacts: bool = True, sphere_margin: float = 0.0,
                       self_collision: bool = True, self_pairs: SelfPairList | None = None,
                       scenery: Scenery | None = None, links: torch.Tensor | None = None,
-                      link_pull: torch.Tensor | None = None, pieces=None,
-                      radius_offset: torch.Tensor | None = None) -> HandObjectState:
+                      link_pull: torch.Tensor | None = None, pieces=None) -> HandObjectState:
     """FK, fingertip contacts and penetration for ``B`` poses (root ``(B, 7)``, joints ``(B, J)``).
 
     ``tip_spheres`` ``(F',)`` are the task fingertips' contact-sphere indices; ``exact_contacts``
@@ -139,14 +141,11 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
     nearest points (`datagen.synth.links.link_contacts`); ``link_pull`` ``(L,)`` bool: those the
     distance term pulls; ``pieces``: the targets' convex pieces (`GraspTarget.pieces`, same
     order), each sphere's penetration the deeper of the surface's and the pieces' (None: the
-    surface's); ``radius_offset`` ``(S,)`` m: subtracted from each sphere's radius against the
-    object (not against the hand itself: self-collision keeps the full spheres).
+    surface's).
     """
     T = hand.link_transforms(root_pose, joints)
     centres, radii = hand.spheres(root_pose, joints, transforms=T)
     centres_all, radii_all = centres, radii
-    if radius_offset is not None:
-        radii = radii - radius_offset
     tips = centres[:, tip_spheres]
     d_c, closest, outward = _query_targets(targets, object_index, tips, exact=exact_contacts)
     d_tip = d_c - radii[tip_spheres]
@@ -205,21 +204,9 @@ def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor
     if state.links is None:
         return state.contact_points, state.contact_normals, None
     tips = state.contact_points.new_ones(state.contact_points.shape[:2])
-    bounds = contact_bounds(state.links.gap, cfg)
-    if cfg.palm_virtual and state.link_palm is not None:
-        bounds = torch.where(state.link_palm, torch.ones_like(bounds), bounds)
     return (torch.cat([state.contact_points, state.links.points], 1),
             torch.cat([state.contact_normals, state.links.normals], 1),
-            torch.cat([tips, bounds], 1))
-
-
-def huber(x: torch.Tensor, delta: float) -> torch.Tensor:
-    """``(...)`` m^2: ``x^2`` within ``delta`` (m) of 0, ``delta (2 |x| - delta)`` beyond (C1, its
-    slope 2 delta out there, not fading as x -> delta); ``delta = 0``: ``x^2``."""
-    if delta <= 0:
-        return x * x
-    a = x.abs()
-    return torch.where(a <= delta, x * x, delta * (2 * a - delta))
+            torch.cat([tips, contact_bounds(state.links.gap, cfg)], 1))
 
 
 def palm_opposition(state: HandObjectState) -> torch.Tensor | None:
@@ -261,7 +248,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     e_dist = ((state.tip_distance + cfg.sphere_margin_m) ** 2).sum(-1)
     e_link = e_dist.new_zeros(e_dist.shape)
     if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
-        e_link = huber(state.links.gap[:, state.link_pull] + cfg.sphere_margin_m, cfg.link_huber_m).sum(-1)
+        e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
     e_opp = palm_opposition(state) if w.palm_opposition > 0 else None
     total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)

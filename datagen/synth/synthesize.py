@@ -203,7 +203,6 @@ class _Batch:
     links: torch.Tensor | None = None  # (L,) the grasp type's extra contact links (palm, phalanges); None: fingertips only
     link_pull: torch.Tensor | None = None  # (L,) bool: those the distance term pulls onto the surface
     pieces: list | None = None  # the targets' convex pieces for the penetration terms (cfg.penetration_pieces); None: the surface only
-    radius_offset: torch.Tensor | None = None  # (S,) m each sphere counts smaller against the object (cfg.palm_sink_m); None: 0
 
 
 def _grasp_links(hand, grasp_type, finger_index) -> tuple[torch.Tensor | None, torch.Tensor | None]:
@@ -238,9 +237,8 @@ def _setup(hand, targets, task, cfg, num_per_object: int, gen: torch.Generator, 
     root, joints = initial_poses(hand, targets, seed_index, task.init, gen, tip_index=finger_index, scenery=scenery)
     directions = sample_directions(cfg.num_directions, generator=gen, device=dev, dtype=dt)
     pieces = [t.pieces() for t in targets] if cfg.penetration_pieces else None
-    offset = (cfg.palm_sink_m * (hand.sphere_link_index == hand.palm_link).to(dt)) if cfg.palm_sink_m > 0 else None
     return _Batch(object_index, seed_index, finger_index, contact_sphere_index(hand)[finger_index], scenery,
-                  root, hand.apply_couplings(joints), directions, links, pull, pieces, offset)
+                  root, hand.apply_couplings(joints), directions, links, pull, pieces)
 
 
 def _energy_on(hand, targets, task, cfg, b: _Batch):
@@ -256,8 +254,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
             state = hand_object_state(hand, targets, index, torch.cat([t, q], -1), jj, b.tip_spheres,
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
-                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces,
-                                      radius_offset=b.radius_offset)
+                                      scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces)
             terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
@@ -314,7 +311,7 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
         grasp_j, root_f = hand.apply_couplings(x.joints), x.root_pose()
         state = hand_object_state(hand, targets, idx, root_f, grasp_j, b.tip_spheres,
                                   sphere_margin=cfg.sphere_margin_m, scenery=b.scenery, links=b.links,
-                                  link_pull=b.link_pull, pieces=b.pieces, radius_offset=b.radius_offset)
+                                  link_pull=b.link_pull, pieces=b.pieces)
         pre_j, sq_j = force_squeeze(hand, root_f, grasp_j, b.tip_spheres, state.contact_points, state.contact_normals,
                                     cfg.contact.mu, cfg.squeeze_kp, cfg.squeeze_force_n, cfg.squeeze_gap_m,
                                     finger_joint_mask(hand), mount=_mount(task, targets, idx),
@@ -322,7 +319,7 @@ def _finish(hand, targets, task, cfg, b: _Batch, x: PoseVariables):
 
         def depth(j):  # deepest collision-sphere penetration (m) at joints j, this root
             return hand_object_state(hand, targets, idx, root_f, j, b.tip_spheres, self_collision=False,
-                                     scenery=b.scenery, pieces=b.pieces, radius_offset=b.radius_offset).max_penetration
+                                     scenery=b.scenery, pieces=b.pieces).max_penetration
 
         pre_j = backtrack_pregrasp(hand, grasp_j, pre_j, depth)
     cat = lambda j: torch.cat([root_f, j], -1)  # noqa: E731

@@ -7,7 +7,7 @@ import trimesh
 
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig
-from datagen.synth.energies import contact_bounds, contact_sphere_index, hand_object_state, huber, palm_opposition
+from datagen.synth.energies import contact_bounds, contact_sphere_index, hand_object_state, palm_opposition
 from datagen.synth.init import initial_poses
 from datagen.tasks import InitConfig
 from datagen.synth.links import contact_links, finger_chains, link_contacts
@@ -63,17 +63,6 @@ def test_contact_bounds_fall_from_touching_to_the_activation_distance(hand):
     m = cfg.sphere_margin_m
     gap = torch.tensor([-0.003, -m, -m + 0.005, -m + 0.01, 0.05], dtype=torch.float64)
     assert torch.allclose(contact_bounds(gap, cfg), torch.tensor([1.0, 1.0, 0.5, 0.0, 0.0], dtype=torch.float64))
-
-
-def test_huber_is_squared_near_its_target_and_linear_beyond():
-    """Hand-computed: delta 1 mm, x^2 within it, 1 mm (2 |x| - 1 mm) beyond; delta 0 is x^2."""
-    x = torch.tensor([0.0, 5e-4, -1e-3, 3e-3, -3e-3], dtype=torch.float64)
-    want = torch.tensor([0.0, 2.5e-7, 1e-6, 5e-6, 5e-6], dtype=torch.float64)
-    assert torch.allclose(huber(x, 1e-3), want, rtol=1e-12, atol=0)
-    assert torch.equal(huber(x, 0.0), x * x)
-    x = torch.tensor([2e-3, 1e-2], dtype=torch.float64, requires_grad=True)
-    huber(x, 1e-3).sum().backward()
-    assert torch.allclose(x.grad, torch.tensor([2e-3, 2e-3], dtype=torch.float64))  # slope 2 delta: no fade
 
 
 def test_palm_opposition_matches_the_exact_ball(hand, ball):
