@@ -24,9 +24,6 @@ class EnergyWeights(Config):
     self_penetration: float = 1e5  #: per m^2 of summed squared sphere-pair overlap
     joint_limits: float = 1e2  #: per rad of summed joint-limit violation
     link_distance: float = 1e4  #: per m^2 of summed squared gap of a grasp type's pulled links (the palm of a power grasp)
-    #: per unit of the palm's opposition error, (1 + n_palm . mean_i n_i) / 2 in [0, 1] (inward normals of
-    #: the palm's nearest point and the task fingertips' contacts: 0 when every fingertip pushes against the palm)
-    palm_opposition: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):

@@ -13,10 +13,7 @@
   SDF grid (exact mesh distances are kept for the few fingertip contacts), plus the same against
   a mounted task object's static scenery (`datagen.synth.scenery`);
 * ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
-* ``E_joint``: summed joint-limit violation (rad);
-* with a grasp type's palm contact (not in the paper): ``w_l E_link``, the pulled links' summed
-  squared gap (m^2), and ``w_o E_opp``, the fingertips' opposition to the palm
-  (:func:`palm_opposition`; Shadow's power grasps: their palm never carried load).
+* ``E_joint``: summed joint-limit violation (rad).
 
 The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
 touches the object, its gradient there ignores the obstacle, and a line search stalls on it
@@ -56,7 +53,6 @@ class HandObjectState:
     joint_violation: torch.Tensor  # (B,) rad
     links: LinkContacts | None = None  # a grasp type's extra contact links (palm, phalanges), L of them
     link_pull: torch.Tensor | None = None  # (L,) bool: pulled onto the surface by E_dist (else GWS candidates only)
-    link_palm: torch.Tensor | None = None  # (L,) bool: the palm link among them
 
 
 @dataclass
@@ -70,13 +66,11 @@ class EnergyTerms:
     joint_limits: torch.Tensor
     total: torch.Tensor
     link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
-    palm_opposition: torch.Tensor | None = None  # the fingertips' opposition to the palm, in [0, 1]
 
     def as_dict(self) -> dict[str, torch.Tensor]:
         out = {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
-        for k in ("link_distance", "palm_opposition"):
-            if getattr(self, k) is not None:
-                out[k] = getattr(self, k)
+        if self.link_distance is not None:
+            out["link_distance"] = self.link_distance
         return out
 
 
@@ -169,7 +163,6 @@ def hand_object_state(hand, targets, object_index, root_pose, joints, tip_sphere
         links=(link_contacts(hand, targets, object_index, centres, radii, links)
                if links is not None and links.numel() else None),
         link_pull=link_pull,
-        link_palm=links == hand.palm_link if links is not None else None,
     )
 
 
@@ -209,17 +202,6 @@ def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor
             torch.cat([tips, contact_bounds(state.links.gap, cfg)], 1))
 
 
-def palm_opposition(state: HandObjectState) -> torch.Tensor | None:
-    """``(B,)`` in [0, 1]: ``(1 + n_p . mean_i n_i) / 2``, ``n_p`` the inward normal at the palm's
-    nearest object point and ``n_i`` the task fingertips' (the directions each pushes the object):
-    0 when every fingertip pushes straight against the palm, 1/2 when they push across it, 1 with
-    it. None without a palm contact."""
-    if state.links is None or state.link_palm is None or not bool(state.link_palm.any()):
-        return None
-    n_p = state.links.normals[:, state.link_palm][:, 0]  # (B, 3)
-    return 0.5 * (1.0 + (n_p * state.contact_normals.mean(1)).sum(-1))
-
-
 def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
                    task_origin: torch.Tensor | None = None) -> EnergyTerms:
     """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
@@ -249,10 +231,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     e_link = e_dist.new_zeros(e_dist.shape)
     if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
         e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
-    e_opp = palm_opposition(state) if w.palm_opposition > 0 else None
     total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
-    if e_opp is not None:
-        total = total + w.palm_opposition * e_opp
     return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total,
-                       link_distance=e_link if state.links is not None else None, palm_opposition=e_opp)
+                       link_distance=e_link if state.links is not None else None)

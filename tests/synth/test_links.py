@@ -7,7 +7,7 @@ import trimesh
 
 from datagen.hands import load_hand
 from datagen.synth import GraspTarget, SynthConfig
-from datagen.synth.energies import contact_bounds, contact_sphere_index, hand_object_state, palm_opposition
+from datagen.synth.energies import contact_bounds
 from datagen.synth.init import initial_poses
 from datagen.tasks import InitConfig
 from datagen.synth.links import contact_links, finger_chains, link_contacts
@@ -63,27 +63,3 @@ def test_contact_bounds_fall_from_touching_to_the_activation_distance(hand):
     m = cfg.sphere_margin_m
     gap = torch.tensor([-0.003, -m, -m + 0.005, -m + 0.01, 0.05], dtype=torch.float64)
     assert torch.allclose(contact_bounds(gap, cfg), torch.tensor([1.0, 1.0, 0.5, 0.0, 0.0], dtype=torch.float64))
-
-
-def test_palm_opposition_matches_the_exact_ball(hand, ball):
-    """(1 + n_p . mean_i n_i) / 2 with the exact ball's inward normals -c / |c| at the palm's nearest
-    sphere (the smallest exact gap |c| - R - r of the palm's) and at the fingertips' contact spheres."""
-    index = torch.zeros(6, dtype=torch.long)
-    poses = [initial_poses(hand, [ball], index[:3], InitConfig(distance_m=(0.0, 0.02), curl=curl),
-                           torch.Generator().manual_seed(1)) for curl in (0.0, 1.0)]  # open, fully curled
-    root, q = (torch.cat(t) for t in zip(*poses))
-    q = hand.apply_couplings(q)
-    tips = contact_sphere_index(hand)
-    state = hand_object_state(hand, [ball], index, root, q, tips, links=torch.tensor([hand.palm_link]),
-                              link_pull=torch.tensor([True]))
-    c, r = (t.detach().numpy() for t in hand.spheres(root, q))
-    on_palm = (hand.sphere_link_index == hand.palm_link).numpy()
-    gap = np.linalg.norm(c, axis=-1) - R - r
-    palm_c = c[np.arange(6), np.where(on_palm[None], gap, np.inf).argmin(-1)]
-    unit = lambda v: v / np.linalg.norm(v, axis=-1, keepdims=True)  # noqa: E731
-    want = 0.5 * (1 + (-unit(palm_c) * (-unit(c[:, tips.numpy()])).mean(1)).sum(-1))
-    got = palm_opposition(state).numpy()
-    assert np.abs(got - want).max() < 0.01 and np.ptp(want) > 0.05  # poses that differ, each matched
-    no_palm = hand_object_state(hand, [ball], index, root, q, tips, links=torch.tensor(contact_links(hand)[:2]),
-                                link_pull=torch.tensor([True, True]))
-    assert palm_opposition(no_palm) is None
