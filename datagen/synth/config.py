@@ -24,7 +24,6 @@ class EnergyWeights(Config):
     self_penetration: float = 1e5  #: per m^2 of summed squared sphere-pair overlap
     joint_limits: float = 1e2  #: per rad of summed joint-limit violation
     link_distance: float = 1e4  #: per m^2 of summed squared gap of a grasp type's pulled links (the palm of a power grasp)
-    lift: float = 0.0  #: tabletop targets: mean over K of -cos(s_Wt, s_Wg) for the lift's TWS sector (energies.py E_lift; a grasp type's setting)
 
     def __post_init__(self):
         for f in fields(self):
@@ -68,8 +67,6 @@ class SynthConfig(Config):
     seed_max_depth_m: float | None = None
     self_pair_skin_m: float = 0.004  #: self-collision pair lists reused while spheres move < half this, m (0: rebuilt every step)
     task_wrench_at_com: bool = False  #: free object, gamma < 180: w_t acts at its centre of mass (as its test applies it), not at the contacts
-    lift_gamma_deg: float = 30.0  #: half-angle of the lift's TWS sector about the table's up force at the centre of mass (E_lift), deg
-    lift_seed_choice: bool = False  #: tabletop targets: the seed choice adds the whole-hand contacts' task epsilon for the lift sector (select.py)
     pinch_antipodal: float = 0.0  #: two task fingers, gamma = 180: weight within E_t of the pinch's antipodal error (wrench/antipodal.py)
     link_activation_m: float = 0.01  #: a grasp type's extra contact counts in the GWS with bound 1 - gap / this (0 beyond), m
     penetration_pieces: bool = False  #: penetration terms also against the object's convex pieces (what MuJoCo collides: synth/pieces.py)
@@ -103,8 +100,6 @@ class SynthConfig(Config):
             raise ConfigError(f"SynthConfig.pinch_antipodal must be a finite number >= 0, got {self.pinch_antipodal}")
         if self.seed_max_depth_m is not None and not (math.isfinite(self.seed_max_depth_m) and self.seed_max_depth_m > 0):
             raise ConfigError(f"SynthConfig.seed_max_depth_m must be null or a finite number > 0 m, got {self.seed_max_depth_m}")
-        if not 0 <= self.lift_gamma_deg <= 180:
-            raise ConfigError(f"SynthConfig.lift_gamma_deg must lie in [0, 180] deg, got {self.lift_gamma_deg}")
         if self.seeds_per_grasp < 1 or self.seed_select_iter < 1:
             raise ConfigError(f"SynthConfig: seeds_per_grasp and seed_select_iter must be >= 1, "
                               f"got {self.seeds_per_grasp}, {self.seed_select_iter}")

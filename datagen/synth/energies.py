@@ -13,12 +13,7 @@
   SDF grid (exact mesh distances are kept for the few fingertip contacts), plus the same against
   a mounted task object's static scenery (`datagen.synth.scenery`);
 * ``E_self``: summed squared overlap of the self-collision sphere pairs (m^2);
-* ``E_joint``: summed joint-limit violation (rad);
-* ``E_lift`` (not in the paper; tabletop targets, ``weights.lift > 0``): the cosine task energy
-  of the same contacts for the lift, the TWS sector of half-angle ``cfg.lift_gamma_deg`` about
-  the force along the table's up direction at the object's centre of mass (:func:`lift_frames`):
-  force closure alone is as happy with contacts on the top face pressing down, which can hold
-  the object against the table but not lift it off.
+* ``E_joint``: summed joint-limit violation (rad).
 
 The penetration terms are squared hinges: a plain hinge has a kink exactly where the hand
 touches the object, its gradient there ignores the obstacle, and a line search stalls on it
@@ -41,7 +36,7 @@ from datagen.synth.stacked import grid_query
 from datagen.wrench import pinch_antipodal_error
 from datagen.wrench.tws import task_wrench_at_contacts
 
-__all__ = ["EnergyTerms", "HandObjectState", "evaluate_state", "lift_frames", "lift_wrench"]
+__all__ = ["EnergyTerms", "HandObjectState", "evaluate_state"]
 
 
 @dataclass
@@ -71,13 +66,11 @@ class EnergyTerms:
     joint_limits: torch.Tensor
     total: torch.Tensor
     link_distance: torch.Tensor | None = None  # a grasp type's pulled links' summed squared gap, m^2
-    lift: torch.Tensor | None = None  # E_lift, mean over K of -cos (tabletop targets with weights.lift > 0)
 
     def as_dict(self) -> dict[str, torch.Tensor]:
         out = {k: getattr(self, k) for k in ("task", "distance", "penetration", "self_penetration", "joint_limits", "total")}
-        for k in ("link_distance", "lift"):
-            if getattr(self, k) is not None:
-                out[k] = getattr(self, k)
+        if self.link_distance is not None:
+            out["link_distance"] = self.link_distance
         return out
 
 
@@ -190,42 +183,6 @@ def task_origins(task, targets, object_index: torch.Tensor, cfg) -> torch.Tensor
     return com.to(object_index.device)[object_index]
 
 
-def lift_frames(targets, object_index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """``(up (B, 3), com (B, 3) m)``: each sample's table up direction (unit, object frame; 0 for
-    a floating target) and its object's centre of mass, where the lift acts; None when no
-    target rests on a table."""
-    if all(t.support_plane is None for t in targets):
-        return None
-    up = torch.as_tensor(np.stack([np.asarray(t.support_plane[:3], dtype=np.float64) if t.support_plane is not None
-                                   else np.zeros(3) for t in targets]), dtype=torch.float64)
-    com = torch.as_tensor(np.stack([t.centre_of_mass for t in targets]), dtype=torch.float64)
-    dev = object_index.device
-    return up.to(dev)[object_index], com.to(dev)[object_index]
-
-
-def lift_wrench(up: torch.Tensor, com: torch.Tensor, points: torch.Tensor, normalize: bool = True) -> torch.Tensor:
-    """``(B, 6)`` the lift's unit wrench in the GWS coordinates of contacts ``points (B, m, 3)``:
-    the force along ``up (B, 3)`` (the hand lifting the object against its weight) acting at
-    ``com (B, 3)`` m (`datagen.wrench.tws.task_wrench_at_contacts`); a row whose ``up`` is 0 (a
-    floating target) gets the object frame's z (its energy is masked by the caller)."""
-    on = up.norm(dim=-1, keepdim=True) > 0
-    up = torch.where(on, up, torch.tensor([0.0, 0.0, 1.0], dtype=up.dtype, device=up.device))
-    w = torch.cat([up, torch.zeros_like(up)], -1).to(points.dtype)
-    return task_wrench_at_contacts(w, points, com.to(points.dtype), normalize=normalize)
-
-
-def lift_energy(points: torch.Tensor, normals: torch.Tensor, bounds: torch.Tensor | None, cfg,
-                lift: tuple[torch.Tensor, torch.Tensor], directions: torch.Tensor) -> torch.Tensor:
-    """``(B,)`` E_lift: the cosine task energy (eq. 8) of the contacts for the lift sector
-    (:func:`lift_wrench`, half-angle ``cfg.lift_gamma_deg``), averaged over the K directions
-    ``(K, 6)``; 0 for a floating target."""
-    up, com = lift
-    w = lift_wrench(up, com, points, normalize=cfg.contact.normalize)
-    e = cfg.contact.task_energy(points, normals, w, cfg.lift_gamma_deg, directions, kind=cfg.task_energy_kind,
-                                weights=bounds) / directions.shape[0]
-    return torch.where(up.norm(dim=-1) > 0, e, torch.zeros_like(e))
-
-
 def contact_bounds(gap: torch.Tensor, cfg) -> torch.Tensor:
     """``(...)`` normal-force bound of an extra contact link in the GWS from its gap ``(...)`` m:
     1 when touching (gap at most ``-cfg.sphere_margin_m``, the sink the penetration term allows),
@@ -246,14 +203,12 @@ def contact_set(state: HandObjectState, cfg) -> tuple[torch.Tensor, torch.Tensor
 
 
 def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
-                   task_origin: torch.Tensor | None = None,
-                   lift: tuple[torch.Tensor, torch.Tensor] | None = None) -> EnergyTerms:
+                   task_origin: torch.Tensor | None = None) -> EnergyTerms:
     """Weighted energy of a :class:`HandObjectState` for a task and K directions ``(K, 6)``.
 
     ``task_origin`` ``(B, 3)`` m: where the task wrench acts on each sample's object (its centre of
     mass, :func:`task_origins`); it is then moved to the contacts (:func:`task_wrench_at_contacts`).
-    None: ``task.w_t`` as given, i.e. at the contact centroid under CPN. ``lift``: the
-    samples' :func:`lift_frames` for ``E_lift`` (None: no lift term).
+    None: ``task.w_t`` as given, i.e. at the contact centroid under CPN.
 
     ``E_dist`` aims each contact sphere at a gap of ``-cfg.sphere_margin_m`` (sunk by the margin
     the penetration term allows, since the spheres overshoot the hand's collision shapes).
@@ -276,10 +231,7 @@ def evaluate_state(state: HandObjectState, cfg, task, directions: torch.Tensor,
     e_link = e_dist.new_zeros(e_dist.shape)
     if state.links is not None and state.link_pull is not None and bool(state.link_pull.any()):
         e_link = ((state.links.gap[:, state.link_pull] + cfg.sphere_margin_m) ** 2).sum(-1)
-    e_lift = None if lift is None else lift_energy(points, normals, bounds, cfg, lift, directions)
     total = (w.task * e_task + w.distance * e_dist + w.link_distance * e_link + w.penetration * state.sphere_penetration
              + w.self_penetration * state.self_penetration + w.joint_limits * state.joint_violation)
-    if e_lift is not None:
-        total = total + w.lift * e_lift
     return EnergyTerms(e_task, e_dist, state.sphere_penetration, state.self_penetration, state.joint_violation, total,
-                       link_distance=e_link if state.links is not None else None, lift=e_lift)
+                       link_distance=e_link if state.links is not None else None)

@@ -75,26 +75,22 @@ def link_epsilon(points: torch.Tensor, normals: torch.Tensor, touching: torch.Te
         if task is None:
             eps[sel] = epsilon_metric(p.double(), n.double(), mu, **kw)
             continue
-        w0 = task[0][sel] if torch.is_tensor(task[0]) and task[0].dim() > 1 else task[0]  # one per sample
-        w_t = w0 if task_origin is None else task_wrench_at_contacts(
-            w0, p.double(), task_origin[sel].double(), normalize=kw.get("normalize", True))
+        w_t = task[0] if task_origin is None else task_wrench_at_contacts(
+            task[0], p.double(), task_origin[sel].double(), normalize=kw.get("normalize", True))
         eps[sel] = task_epsilon(p.double(), n.double(), mu, w_t, task[1], **kw)
     return eps
 
 
 def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joints: torch.Tensor,
                 energy: torch.Tensor, tip_spheres: torch.Tensor, task, cfg,
-                task_origin: torch.Tensor | None = None,
-                lift: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+                task_origin: torch.Tensor | None = None) -> torch.Tensor:
     """``(N,)`` how promising each pose is (higher is better): with the task energy on, the
     whole-hand epsilon of poses whose task fingertips are in contact -- force closure's (gamma 180
     deg), or the task epsilon over the task's TWS sector -- ties (e.g. none covering it) broken by
     the lower energy; with the task energy off: minus the energy; with ``cfg.seed_max_depth_m``,
     poses with a sphere deeper than that in the object lowered by `DEEP_PENALTY`. ``root (N, 7)``,
     ``joints (N, J)`` coupled, ``energy (N,)``; ``seed_index (N,)`` each pose's target;
-    ``task_origin`` ``(N, 3)``: where the task wrench acts (:func:`link_epsilon`); ``lift``
-    (`datagen.synth.energies.lift_frames` of the poses, with ``cfg.lift_seed_choice``): the same
-    contacts' task epsilon for the lift sector is added to the epsilon (tabletop poses)."""
+    ``task_origin`` ``(N, 3)``: where the task wrench acts (:func:`link_epsilon`)."""
     cfg = cfg.for_hand(hand)
     with torch.no_grad():
         score = -energy.clamp(-1e2, 1e2) / 1e3
@@ -115,28 +111,10 @@ def seed_scores(hand, targets, seed_index: torch.Tensor, root: torch.Tensor, joi
                 eps = eps.index_copy(0, rows, link_epsilon(
                     p[rows], n[rows], touching[rows], cfg.contact.mu, normalize=cfg.contact.normalize,
                     task=None if closure else (task.w_t, task.gamma_deg), task_origin=origin).to(energy.dtype))
-            if lift is not None and cfg.lift_seed_choice and rows.numel():
-                eps = eps + _lift_epsilon(p, n, touching, rows, lift, cfg).to(energy.dtype)
             score = score + 1e3 * eps
         if cfg.seed_max_depth_m is not None:
             score = torch.where(tips.max_penetration > cfg.seed_max_depth_m, score - DEEP_PENALTY, score)
         return score
-
-
-def _lift_epsilon(p, n, touching, rows, lift, cfg) -> torch.Tensor:
-    """``(N,)`` the task epsilon of the touching contacts ``p, n (N, L, 3)`` of poses ``rows`` for the
-    lift sector (force along the table's up at the centre of mass, half-angle ``cfg.lift_gamma_deg``);
-    0 elsewhere and for a floating target."""
-    up, com = lift
-    on = up.norm(dim=-1) > 0
-    rows = rows[on[rows]]
-    out = torch.zeros(p.shape[0], dtype=torch.float64, device=p.device)
-    if rows.numel():
-        w = torch.cat([up[rows], torch.zeros_like(up[rows])], -1)
-        out = out.index_copy(0, rows, link_epsilon(p[rows], n[rows], touching[rows], cfg.contact.mu,
-                                                   normalize=cfg.contact.normalize, task=(w, cfg.lift_gamma_deg),
-                                                   task_origin=com[rows]))
-    return out
 
 
 def top_seeds(score: torch.Tensor, S: int) -> torch.Tensor:

@@ -25,7 +25,7 @@ import torch
 
 from datagen.synth.config import SynthConfig, TaskSpec
 from datagen.tasks.grasp_type import TASK_GRASP_TYPE, load_grasp_type
-from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state, lift_frames, task_origins
+from datagen.synth.energies import contact_sphere_index, evaluate_state, hand_object_state, task_origins
 from datagen.synth.init import initial_poses
 from datagen.synth.optimizer import GroupedDescent, PoseVariables
 from datagen.synth.scenery import Scenery
@@ -248,7 +248,6 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
     def energy_on(index):
         self_pairs = SelfPairList(hand, cfg.self_pair_skin_m) if cfg.self_pair_skin_m > 0 else None
         origin = task_origins(task, targets, index, cfg)
-        lift = lift_frames(targets, index) if cfg.weights.lift > 0 else None
 
         def energy_fn(t, q, j):
             jj = hand.apply_couplings(j)
@@ -256,7 +255,7 @@ def _energy_on(hand, targets, task, cfg, b: _Batch):
                                       exact_contacts=cfg.exact_contacts, sphere_margin=cfg.sphere_margin_m,
                                       self_collision=cfg.weights.self_penetration > 0, self_pairs=self_pairs,
                                       scenery=b.scenery, links=b.links, link_pull=b.link_pull, pieces=b.pieces)
-            terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin, lift=lift)
+            terms = evaluate_state(state, cfg, task, b.directions, task_origin=origin)
             extras = {k: v.detach() for k, v in terms.as_dict().items()}
             extras.update(tip_distance=state.tip_distance.detach(), max_penetration=state.max_penetration.detach())
             return terms.total, extras
@@ -280,8 +279,7 @@ def _optimize(hand, targets, task, cfg, b: _Batch, callback, threads: int):
         first = min(cfg.seed_select_iter, cfg.iters)
         x, e, extras = _run_split(opt, energy_on, x, b.seed_index, targets, first, callback, 0, threads)
         scores = seed_scores(hand, targets, b.seed_index, x.root_pose(), hand.apply_couplings(x.joints), e,
-                             b.tip_spheres, task, cfg, task_origins(task, targets, b.seed_index, cfg),
-                             lift=lift_frames(targets, b.seed_index) if cfg.lift_seed_choice else None)
+                             b.tip_spheres, task, cfg, task_origins(task, targets, b.seed_index, cfg))
         keep = top_seeds(scores, S)
         x = PoseVariables(x.translation[keep], x.quaternion[keep], x.joints[keep])
         root, joints = root[keep], joints[keep]
