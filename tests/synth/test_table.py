@@ -192,3 +192,29 @@ def test_wrap_starts_on_the_table_are_the_tasks_surround_starts(shadow, box_targ
     assert torch.all(plane_distance(palm.origin.double(), torch.tensor(on_table.support_plane).double()) > 0)
     free = [initial_poses(shadow, [floating], idx, c, torch.Generator().manual_seed(0)) for c in (init, surround)]
     assert not torch.equal(free[0][0], free[1][0])
+
+
+def test_allegro_edge_pinch_starts_also_pinch_along_the_length(box_targets):
+    """Allegro's edge pinch (its ``hands:`` block: roll up to 90 deg) starts on the flat box with
+    pinch axes from across its 4 cm width to along its 6 cm length, every one horizontal; the
+    type's own roll (20 deg, the other hands') keeps them across the width."""
+    from datagen.tasks import load_grasp_type
+
+    allegro = load_hand("allegro")
+    _, on_table = box_targets
+    task = load_task("force_closure")
+    sc = Scenery.for_task(task, [on_table], CPU, torch.float32, sphere_margin_m=0.0)
+    up, axis = (torch.tensor(v, dtype=torch.float32) for v in (on_table.footprint.up, on_table.footprint.axis))
+    idx = torch.zeros(64, dtype=torch.long)
+    angles = {}
+    for name, kind in (("allegro", load_grasp_type("edge_pinch").for_hand("allegro")), ("type", load_grasp_type("edge_pinch"))):
+        init = kind.apply_init(task.init)
+        root, joints = initial_poses(allegro, [on_table], idx, init, torch.Generator().manual_seed(0), scenery=sc)
+        tips = allegro.fingertip_points(root, joints)  # the thumb first
+        pinch = tips[:, 0] - tips[:, 1:].mean(1)
+        p = pinch / pinch.norm(dim=-1, keepdim=True)
+        assert torch.all((p @ up).abs() < 1e-4)  # horizontal
+        angles[name] = torch.rad2deg(torch.acos((p @ axis).abs().clamp(max=1.0)))  # from the width's direction
+    assert float(angles["type"].max()) <= 20.0 + 0.1
+    assert float(angles["allegro"].max()) <= 90.0 + 0.1 and float(angles["allegro"].max()) > 70.0
+    assert float((angles["allegro"] > 45).float().mean()) > 0.3  # about half the starts nearer the length
