@@ -200,25 +200,28 @@ def _block_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.
     link = index_add(link, 1, t["cluster_link"], centre * t["cluster_weight"][:, None])
     ra, rb = t["link_radius"][t["block_a"]], t["link_radius"][t["block_b"]]
     lgap = (link.index_select(1, t["block_a"]) - link.index_select(1, t["block_b"])).norm(dim=-1) - ra - rb
-    meet = (lgap - _LINK_TOLERANCE_M < margin).T.contiguous()  # (blocks, B)
+    block, pose = (lgap - _LINK_TOLERANCE_M < margin).T.nonzero(as_tuple=True)  # by block, then pose
     per_pose = torch.is_tensor(margin) and margin.dim() > 0
     bs, gs = [], []
-    for k, (a0, a1, b0, b1) in enumerate(t["blocks"]):
-        poses = meet[k].nonzero().squeeze(-1)
+    counts = torch.bincount(block, minlength=len(t["blocks"])).tolist()
+    for k, (poses, (a0, a1, b0, b1)) in enumerate(zip(pose.split(counts), t["blocks"])):
         if poses.numel() == 0:
             continue
-        sub = centre.index_select(0, poses) if poses.numel() < B else centre
-        d = torch.cdist(sub[:, a0:a1], sub[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist").reshape(poses.numel(), -1)
+        if poses.numel() < B:
+            xa, xb = centre[:, a0:a1].index_select(0, poses), centre[:, b0:b1].index_select(0, poses)
+        else:
+            xa, xb = centre[:, a0:a1], centre[:, b0:b1]
+        d = torch.cdist(xa, xb, compute_mode="donot_use_mm_for_euclid_dist").reshape(poses.numel(), -1)
         m = margin.index_select(0, poses) if per_pose else margin
         bb, cell = (d - t["cell_reach"][k] < m).nonzero(as_tuple=True)
-        bs.append(poses[bb])
-        gs.append(t["cell_group"][k][cell])
+        bs.append(poses.index_select(0, bb))
+        gs.append(t["cell_group"][k].index_select(0, cell))
     if not bs:
         empty = torch.zeros(0, dtype=torch.long, device=centre.device)
         return empty, empty
     b, g = torch.cat(bs), torch.cat(gs)
     order = torch.argsort(b * t["reach"].shape[0] + g)  # keys are distinct
-    return b[order], g[order]
+    return b.index_select(0, order), g.index_select(0, order)
 
 
 def _dense_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.Tensor]:
