@@ -144,18 +144,15 @@ def _member_tables(cluster: torch.Tensor, radius: torch.Tensor, pairs: torch.Ten
     start = torch.cumsum(count, 0) - count
     x, y = uniq // L, uniq % L
     sides = []
-    for own, far in ((x, y), (y, x)):  # per group, its own cluster's spheres, each with the far cluster
-        n = count[own]
-        g = torch.repeat_interleave(torch.arange(uniq.numel()), n)
-        at = start[own][g] + torch.arange(g.numel()) - (torch.cumsum(n, 0) - n)[g]
-        sides.append((g, members[at], far[g]))
-    g = torch.cat([sides[0][0], sides[1][0]])
+    for side, (own, far) in enumerate(((x, y), (y, x))):  # each group's own cluster's spheres with the far one
+        g, at = _expand(count[own], start[own])
+        sides.append((g, members[at], far[g], torch.full_like(g, side, dtype=torch.bool)))
+    g, sphere, far, second = (torch.cat(v) for v in zip(*sides))
     order = torch.argsort(g, stable=True)  # grouped, the first cluster's spheres first
-    second = torch.cat([torch.zeros_like(sides[0][0], dtype=torch.bool), torch.ones_like(sides[1][0], dtype=torch.bool)])
     probes = torch.bincount(g, minlength=uniq.numel())
     key, pair_of_key = torch.sort(pairs[:, 0] * S + pairs[:, 1])
-    return {"probe_sphere": torch.cat([sides[0][1], sides[1][1]])[order], "probe_far": torch.cat([sides[0][2], sides[1][2]])[order],
-            "probe_second": second[order], "probe_count": probes, "probe_start": torch.cumsum(probes, 0) - probes,
+    return {"probe_sphere": sphere[order], "probe_far": far[order], "probe_second": second[order],
+            "probe_count": probes, "probe_start": torch.cumsum(probes, 0) - probes,
             "cluster_radius": radius, "pair_key": key, "pair_of_key": pair_of_key}
 
 
@@ -266,7 +263,8 @@ def _listed_pairs(t, centres, radii, b, g, margin) -> tuple[torch.Tensor, torch.
     n = t["sizes"][g]
     rows = torch.repeat_interleave(b, n)
     # each candidate's place in the (group, pair) order; its spheres read from there directly
-    at = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n) + torch.arange(rows.numel(), device=rows.device)
+    at = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n) + torch.arange(rows.numel(),
+                                                                                                device=rows.device)
     i, j = t["end_a"][at], t["end_b"][at]
     flat, base = centres.reshape(-1, 3), rows * S
     d = (flat.index_select(0, base + i) - flat.index_select(0, base + j)).norm(dim=-1)
@@ -285,9 +283,11 @@ def _probe_reach(t, radii: torch.Tensor) -> torch.Tensor:
     """(Q,) each probe's sphere radius plus its far cluster's bounding radius (m), kept for the
     ``radii`` tensor it was made from (the hand's own, call after call)."""
     prev = t.get("probe_radii")
-    if not (prev is radii or (prev is not None and (prev.dtype, prev.device, prev.shape) == (radii.dtype, radii.device, radii.shape)
-                              and torch.equal(prev, radii))):
-        t["probe_reach"] = radii.index_select(0, t["probe_sphere"]) + t["cluster_radius"].to(radii).index_select(0, t["probe_far"])
+    kind = (radii.dtype, radii.device, radii.shape)
+    same = prev is radii or (prev is not None and (prev.dtype, prev.device, prev.shape) == kind and torch.equal(prev, radii))
+    if not same:
+        far = t["cluster_radius"].to(radii).index_select(0, t["probe_far"])
+        t["probe_reach"] = radii.index_select(0, t["probe_sphere"]) + far
         t["probe_radii"] = radii
     return t["probe_reach"]
 
@@ -305,8 +305,10 @@ def _probed_pairs(t, centres, centre, radii, b, g, margin) -> tuple[torch.Tensor
     per_hit = torch.is_tensor(margin) and margin.dim() > 0
     hit, q = _expand(t["probe_count"].index_select(0, g), t["probe_start"].index_select(0, g))
     sphere, pose = t["probe_sphere"].index_select(0, q), b.index_select(0, hit)
-    d = (flat.index_select(0, pose * S + sphere) - cflat.index_select(0, pose * C + t["probe_far"].index_select(0, q))).norm(dim=-1)
-    ok = d - _probe_reach(t, radii).index_select(0, q) - _SPHERE_TOLERANCE_M < (margin.index_select(0, hit) if per_hit else margin)
+    far = t["probe_far"].index_select(0, q)
+    d = (flat.index_select(0, pose * S + sphere) - cflat.index_select(0, pose * C + far)).norm(dim=-1)
+    m = margin.index_select(0, hit) if per_hit else margin
+    ok = d - _probe_reach(t, radii).index_select(0, q) - _SPHERE_TOLERANCE_M < m
     ok = ok.nonzero().squeeze(-1)
     second = t["probe_second"].index_select(0, q.index_select(0, ok))
     first, second = (~second).nonzero().squeeze(-1), second.nonzero().squeeze(-1)
@@ -322,8 +324,8 @@ def _probed_pairs(t, centres, centre, radii, b, g, margin) -> tuple[torch.Tensor
     i, j, hit = i.index_select(0, listed), j.index_select(0, listed), hit.index_select(0, listed)
     pair, rows = t["pair_of_key"].index_select(0, slot.index_select(0, listed)), b.index_select(0, hit)
     d = (flat.index_select(0, rows * S + i) - flat.index_select(0, rows * S + j)).norm(dim=-1)
-    near = d < radii.index_select(0, i) + radii.index_select(0, j) + (margin.index_select(0, hit) if per_hit else margin)
-    near = near.nonzero().squeeze(-1)  # the exact gap test
+    m = margin.index_select(0, hit) if per_hit else margin
+    near = (d < radii.index_select(0, i) + radii.index_select(0, j) + m).nonzero().squeeze(-1)  # the exact gap test
     rows, pair = rows.index_select(0, near), pair.index_select(0, near)
     order = torch.argsort(rows * t["rank"].numel() + t["rank"].index_select(0, pair))  # keys are distinct
     return rows.index_select(0, order), pair.index_select(0, order)
@@ -333,7 +335,8 @@ def _expand(count: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, tor
     """``(owner (N,), at (N,))`` of ranges ``start[k] .. start[k] + count[k] - 1`` laid end to end:
     each element's range ``k`` and value (CSR expansion)."""
     owner = torch.repeat_interleave(torch.arange(count.numel(), device=count.device), count)
-    return owner, (start - torch.cumsum(count, 0) + count).index_select(0, owner) + torch.arange(owner.numel(), device=count.device)
+    first = (start - torch.cumsum(count, 0) + count).index_select(0, owner)
+    return owner, first + torch.arange(owner.numel(), device=count.device)
 
 
 def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor,

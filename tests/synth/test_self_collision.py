@@ -191,7 +191,8 @@ def test_sphere_probes_and_listed_pairs_find_the_brute_force_pairs(name, probe):
     B = 10
     frac = torch.rand(B, hand.num_joints, generator=g) * torch.linspace(0.2, 1.0, B)[:, None]
     joints = hand.apply_couplings(hand.joint_lower + frac * (hand.joint_upper - hand.joint_lower))
-    root = torch.cat([0.5 * torch.randn(B, 3, generator=g), torch.nn.functional.normalize(torch.randn(B, 4, generator=g), dim=-1)], -1)
+    quat = torch.nn.functional.normalize(torch.randn(B, 4, generator=g), dim=-1)
+    root = torch.cat([0.5 * torch.randn(B, 3, generator=g), quat], -1)
     c, r = hand.spheres(root, joints)
     i, j = hand.self_collision_pairs[:, 0], hand.self_collision_pairs[:, 1]
     gap = (c[:, i] - c[:, j]).norm(dim=-1) - (r[i] + r[j])  # (B, P), as the narrow phase compares
