@@ -6,7 +6,9 @@ exact ways of skipping most of them:
 
 * **Cluster bounds** (:func:`candidate_pairs`): each link's spheres are grouped in clusters of
   about four neighbours; a sphere pair is looked at only where the bounding spheres of its two
-  clusters come within the asked margin.
+  clusters come within the asked margin, and (hands with many sphere pairs per cluster pair:
+  LEAP, Allegro) only where each of its spheres comes within the margin of the other's cluster
+  bound.
 * **Pair lists reused across iterations** (:class:`SelfPairList`, the neighbour lists of
   molecular dynamics): the sphere pairs of a pose within ``skin_m`` of overlapping are kept, and
   reused as long as no sphere of that pose has moved more than ``skin_m / 2`` in the palm's frame
@@ -64,6 +66,15 @@ def _sphere_clusters(link: torch.Tensor, local: torch.Tensor, size: int) -> torc
 GATHER_GROUPS_PER_BLOCK = 8
 
 
+#: the sphere-against-cluster probes (`_probed_pairs`) run where a hand's cluster pairs hold at
+#: least this many sphere pairs per probe (a probe: one sphere of a cluster pair against the other
+#: cluster), else every pair of a cluster-pair hit goes to the exact test (`_listed_pairs`).
+#: Recorded calls of `datagen synth` on the duck, one thread, probes against pairs: LEAP (1.72
+#: pairs per probe) 3.70 -> 2.53 s, Allegro (1.38) 1.18 -> 1.03 s; E3M5 (1.10) 0.34 -> 0.40 s,
+#: Shadow (0.95) 0.14 -> 0.18 s (benchmarks/results/pipeline.md)
+PROBE_MIN_PAIRS_PER_PROBE = 1.25
+
+
 def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
     """Broad-phase tables of the self-collision pairs, computed once per hand and kept on it.
 
@@ -112,11 +123,37 @@ def _cluster_bounds(hand, cluster_size: int = 4) -> dict:
            "group_a": (uniq // L).to(dev), "group_b": (uniq % L).to(dev),
            "gather": uniq.numel() <= GATHER_GROUPS_PER_BLOCK * len(blocks),
            "sizes": sizes, "starts": torch.cumsum(sizes, 0) - sizes, "order": order, "rank": rank,
-           "end_a": pairs[order, 0], "end_b": pairs[order, 1]}  # each pair's spheres, in (group, pair) order
+           "end_a": pairs[order, 0], "end_b": pairs[order, 1],  # each pair's spheres, in (group, pair) order
+           **{k: v.to(dev) for k, v in _member_tables(link.cpu(), radius.cpu(), pairs.cpu(), uniq.cpu()).items()}}
+    out["probe"] = bool(sizes.sum() >= PROBE_MIN_PAIRS_PER_PROBE * out["probe_count"].sum())
     if not out["gather"]:
         out.update(_block_tables(blocks, owner.to(dev), mean, radius, count, perm.to(dev), out["reach"]))
     hand._self_pair_bounds = out
     return out
+
+
+def _member_tables(cluster: torch.Tensor, radius: torch.Tensor, pairs: torch.Tensor, uniq: torch.Tensor) -> dict:
+    """The sphere-against-cluster stage's tables (`_probed_pairs`). Each group (cluster pair
+    ``(x, y)``) has *probes*: every sphere of x with y, then every sphere of y with x. Keys:
+    ``probe_sphere``, ``probe_far`` (the other cluster), ``probe_second`` (a sphere of y) ``(Q,)``,
+    each group's probes ``probe_start``, ``probe_count (G,)``; ``cluster_radius (C,)`` (m); and
+    ``pair_key (P,)`` (``i S + j`` of each pair, sorted) with ``pair_of_key (P,)``, its pair."""
+    S, L = cluster.numel(), radius.numel()
+    members = torch.argsort(cluster, stable=True)  # the spheres by cluster
+    count = torch.bincount(cluster, minlength=L)
+    start = torch.cumsum(count, 0) - count
+    x, y = uniq // L, uniq % L
+    sides = []
+    for side, (own, far) in enumerate(((x, y), (y, x))):  # each group's own cluster's spheres with the far one
+        g, at = _expand(count[own], start[own])
+        sides.append((g, members[at], far[g], torch.full_like(g, side, dtype=torch.bool)))
+    g, sphere, far, second = (torch.cat(v) for v in zip(*sides))
+    order = torch.argsort(g, stable=True)  # grouped, the first cluster's spheres first
+    probes = torch.bincount(g, minlength=uniq.numel())
+    key, pair_of_key = torch.sort(pairs[:, 0] * S + pairs[:, 1])
+    return {"probe_sphere": sphere[order], "probe_far": far[order], "probe_second": second[order],
+            "probe_count": probes, "probe_start": torch.cumsum(probes, 0) - probes,
+            "cluster_radius": radius, "pair_key": key, "pair_of_key": pair_of_key}
 
 
 def _block_tables(blocks, owner, mean, radius, count, perm, reach) -> dict:
@@ -160,25 +197,28 @@ def _block_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.
     link = index_add(link, 1, t["cluster_link"], centre * t["cluster_weight"][:, None])
     ra, rb = t["link_radius"][t["block_a"]], t["link_radius"][t["block_b"]]
     lgap = (link.index_select(1, t["block_a"]) - link.index_select(1, t["block_b"])).norm(dim=-1) - ra - rb
-    meet = (lgap - _LINK_TOLERANCE_M < margin).T.contiguous()  # (blocks, B)
+    block, pose = (lgap - _LINK_TOLERANCE_M < margin).T.nonzero(as_tuple=True)  # by block, then pose
     per_pose = torch.is_tensor(margin) and margin.dim() > 0
     bs, gs = [], []
-    for k, (a0, a1, b0, b1) in enumerate(t["blocks"]):
-        poses = meet[k].nonzero().squeeze(-1)
+    counts = torch.bincount(block, minlength=len(t["blocks"])).tolist()
+    for k, (poses, (a0, a1, b0, b1)) in enumerate(zip(pose.split(counts), t["blocks"])):
         if poses.numel() == 0:
             continue
-        sub = centre.index_select(0, poses) if poses.numel() < B else centre
-        d = torch.cdist(sub[:, a0:a1], sub[:, b0:b1], compute_mode="donot_use_mm_for_euclid_dist").reshape(poses.numel(), -1)
+        if poses.numel() < B:
+            xa, xb = centre[:, a0:a1].index_select(0, poses), centre[:, b0:b1].index_select(0, poses)
+        else:
+            xa, xb = centre[:, a0:a1], centre[:, b0:b1]
+        d = torch.cdist(xa, xb, compute_mode="donot_use_mm_for_euclid_dist").reshape(poses.numel(), -1)
         m = margin.index_select(0, poses) if per_pose else margin
         bb, cell = (d - t["cell_reach"][k] < m).nonzero(as_tuple=True)
-        bs.append(poses[bb])
-        gs.append(t["cell_group"][k][cell])
+        bs.append(poses.index_select(0, bb))
+        gs.append(t["cell_group"][k].index_select(0, cell))
     if not bs:
         empty = torch.zeros(0, dtype=torch.long, device=centre.device)
         return empty, empty
     b, g = torch.cat(bs), torch.cat(gs)
     order = torch.argsort(b * t["reach"].shape[0] + g)  # keys are distinct
-    return b[order], g[order]
+    return b.index_select(0, order), g.index_select(0, order)
 
 
 def _dense_groups(t, centre: torch.Tensor, margin) -> tuple[torch.Tensor, torch.Tensor]:
@@ -209,17 +249,94 @@ def candidate_pairs(hand, centres: torch.Tensor, radii: torch.Tensor, margin_m: 
             b, g = _block_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
         else:  # the same blocks whole, without one device sync per block (`_block_groups`' nonzero)
             b, g = _dense_groups(t, centre, margin_m[:, None] if per_pose else margin_m)
-        n = t["sizes"][g]
-        rows = torch.repeat_interleave(b, n)
-        # each candidate's place in the (group, pair) order; its spheres read from there directly
-        at = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n) + torch.arange(rows.numel(),
-                                                                                                    device=rows.device)
-        i, j = t["end_a"][at], t["end_b"][at]
-        flat, base = centres.reshape(-1, 3), rows * S
-        d = (flat.index_select(0, base + i) - flat.index_select(0, base + j)).norm(dim=-1)
-        reach = (radii.index_select(0, t["end_a"]) + radii.index_select(0, t["end_b"]))[at]  # radii[i] + radii[j]
-        near = d < reach + (margin_m[rows] if per_pose else margin_m)  # the narrow phase
-        return rows[near], t["order"][at[near]]
+        margin = margin_m.index_select(0, b) if per_pose else margin_m
+        if t["probe"]:
+            return _probed_pairs(t, centres, centre, radii, b, g, margin)
+        return _listed_pairs(t, centres, radii, b, g, margin)
+
+
+def _listed_pairs(t, centres, radii, b, g, margin) -> tuple[torch.Tensor, torch.Tensor]:
+    """`candidate_pairs`' ``(rows, pair)`` from its cluster-pair hits ``(b, g) (H,)``: every sphere
+    pair of each hit through the exact gap test, in (pose, cluster pair, pair) order. ``centres
+    (B, S, 3)`` (m); ``margin``: a number or one per hit (m)."""
+    S = centres.shape[1]
+    n = t["sizes"][g]
+    rows = torch.repeat_interleave(b, n)
+    # each candidate's place in the (group, pair) order; its spheres read from there directly
+    at = torch.repeat_interleave(t["starts"][g] - (torch.cumsum(n, 0) - n), n) + torch.arange(rows.numel(),
+                                                                                                device=rows.device)
+    i, j = t["end_a"][at], t["end_b"][at]
+    flat, base = centres.reshape(-1, 3), rows * S
+    d = (flat.index_select(0, base + i) - flat.index_select(0, base + j)).norm(dim=-1)
+    reach = (radii.index_select(0, t["end_a"]) + radii.index_select(0, t["end_b"]))[at]  # radii[i] + radii[j]
+    near = d < reach + (torch.repeat_interleave(margin, n) if torch.is_tensor(margin) and margin.dim() > 0 else margin)
+    return rows[near], t["order"][at[near]]
+
+
+#: taken off a sphere's gap to another cluster's bounding sphere (m) before the sphere is dropped:
+#: the posed cluster centre is the mean of posed sphere centres, equal to the rigidly moved local
+#: mean up to float32 rounding (~1e-8 m at a hand's scale)
+_SPHERE_TOLERANCE_M = 1e-6
+
+
+def _probe_reach(t, radii: torch.Tensor) -> torch.Tensor:
+    """(Q,) each probe's sphere radius plus its far cluster's bounding radius (m), kept for the
+    ``radii`` tensor it was made from (the hand's own, call after call)."""
+    prev = t.get("probe_radii")
+    kind = (radii.dtype, radii.device, radii.shape)
+    same = prev is radii or (prev is not None and (prev.dtype, prev.device, prev.shape) == kind and torch.equal(prev, radii))
+    if not same:
+        far = t["cluster_radius"].to(radii).index_select(0, t["probe_far"])
+        t["probe_reach"] = radii.index_select(0, t["probe_sphere"]) + far
+        t["probe_radii"] = radii
+    return t["probe_reach"]
+
+
+def _probed_pairs(t, centres, centre, radii, b, g, margin) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(rows, pair)`` of `candidate_pairs` from its cluster-pair hits ``(b, g) (H,)``. First each
+    hit's probes: a sphere of either cluster farther than the margin from the other cluster's
+    bounding sphere is within the margin of none of that cluster's spheres (they lie inside it),
+    so only the pairs of two surviving spheres are candidates (of LEAP's cluster-pair candidates,
+    4-7%); then their exact gap test; sorted into (pose, cluster pair, pair) order.
+    ``centres (B, S, 3)``, ``centre (B, C, 3)``: the sphere and cluster centres (m); ``margin``: a
+    number or one per hit (m)."""
+    S, C, dev = centres.shape[1], centre.shape[1], b.device
+    flat, cflat = centres.reshape(-1, 3), centre.reshape(-1, 3)
+    per_hit = torch.is_tensor(margin) and margin.dim() > 0
+    hit, q = _expand(t["probe_count"].index_select(0, g), t["probe_start"].index_select(0, g))
+    sphere, pose = t["probe_sphere"].index_select(0, q), b.index_select(0, hit)
+    far = t["probe_far"].index_select(0, q)
+    d = (flat.index_select(0, pose * S + sphere) - cflat.index_select(0, pose * C + far)).norm(dim=-1)
+    m = margin.index_select(0, hit) if per_hit else margin
+    ok = d - _probe_reach(t, radii).index_select(0, q) - _SPHERE_TOLERANCE_M < m
+    ok = ok.nonzero().squeeze(-1)
+    second = t["probe_second"].index_select(0, q.index_select(0, ok))
+    first, second = (~second).nonzero().squeeze(-1), second.nonzero().squeeze(-1)
+    ha, sa = hit.index_select(0, ok.index_select(0, first)), sphere.index_select(0, ok.index_select(0, first))
+    hb, sb = hit.index_select(0, ok.index_select(0, second)), sphere.index_select(0, ok.index_select(0, second))
+    count_b = torch.bincount(hb, minlength=g.numel())
+    # each survivor of a hit's first cluster meets the hit's survivors of the second
+    e, at = _expand(count_b.index_select(0, ha), (torch.cumsum(count_b, 0) - count_b).index_select(0, ha))
+    i, j, hit = sa.index_select(0, e), sb.index_select(0, at), ha.index_select(0, e)
+    key = i * S + j
+    slot = torch.searchsorted(t["pair_key"], key).clamp_max(t["pair_key"].numel() - 1)
+    listed = (t["pair_key"].index_select(0, slot) == key).nonzero().squeeze(-1)  # a self-collision pair
+    i, j, hit = i.index_select(0, listed), j.index_select(0, listed), hit.index_select(0, listed)
+    pair, rows = t["pair_of_key"].index_select(0, slot.index_select(0, listed)), b.index_select(0, hit)
+    d = (flat.index_select(0, rows * S + i) - flat.index_select(0, rows * S + j)).norm(dim=-1)
+    m = margin.index_select(0, hit) if per_hit else margin
+    near = (d < radii.index_select(0, i) + radii.index_select(0, j) + m).nonzero().squeeze(-1)  # the exact gap test
+    rows, pair = rows.index_select(0, near), pair.index_select(0, near)
+    order = torch.argsort(rows * t["rank"].numel() + t["rank"].index_select(0, pair))  # keys are distinct
+    return rows.index_select(0, order), pair.index_select(0, order)
+
+
+def _expand(count: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(owner (N,), at (N,))`` of ranges ``start[k] .. start[k] + count[k] - 1`` laid end to end:
+    each element's range ``k`` and value (CSR expansion)."""
+    owner = torch.repeat_interleave(torch.arange(count.numel(), device=count.device), count)
+    first = (start - torch.cumsum(count, 0) + count).index_select(0, owner)
+    return owner, first + torch.arange(owner.numel(), device=count.device)
 
 
 def self_overlap_energy(hand, centres: torch.Tensor, radii: torch.Tensor,

@@ -172,3 +172,42 @@ def test_culled_blocks_find_the_groups_of_the_whole_blocks(name):
         culled, whole = _block_groups(t, centre, margin), _dense_groups(t, centre, margin)
         assert whole[0].numel() > 0
         assert torch.equal(culled[0], whole[0]) and torch.equal(culled[1], whole[1])
+
+
+@pytest.mark.parametrize("name", ["shadow", "allegro", "leap"])
+@pytest.mark.parametrize("probe", [True, False])
+def test_sphere_probes_and_listed_pairs_find_the_brute_force_pairs(name, probe):
+    """Both ways from cluster-pair hits to sphere pairs (the probes of each sphere against the
+    other cluster's bound, `_probed_pairs`, and every pair of a hit, `_listed_pairs`), whichever
+    the hand uses by default, against every pair's own gap (the oracle): exactly the pairs within
+    the margin (0, 1 um, 4 mm, 2 cm), in (pose, cluster pair, pair) order, on random poses from
+    open to fully flexed and moved off the origin."""
+    from datagen.synth.self_collision import _cluster_bounds, candidate_pairs
+
+    hand = _hand(name)
+    t = _cluster_bounds(hand)
+    default = t["probe"]
+    g = torch.Generator().manual_seed(5)
+    B = 10
+    frac = torch.rand(B, hand.num_joints, generator=g) * torch.linspace(0.2, 1.0, B)[:, None]
+    joints = hand.apply_couplings(hand.joint_lower + frac * (hand.joint_upper - hand.joint_lower))
+    quat = torch.nn.functional.normalize(torch.randn(B, 4, generator=g), dim=-1)
+    root = torch.cat([0.5 * torch.randn(B, 3, generator=g), quat], -1)
+    c, r = hand.spheres(root, joints)
+    i, j = hand.self_collision_pairs[:, 0], hand.self_collision_pairs[:, 1]
+    gap = (c[:, i] - c[:, j]).norm(dim=-1) - (r[i] + r[j])  # (B, P), as the narrow phase compares
+    rank = t["rank"]
+    try:
+        t["probe"] = probe
+        per_pose = torch.tensor([0.0, 1e-6, 0.004, 0.02]).repeat(3)[:B]
+        for margin in (0.0, 1e-6, 0.004, 0.02, per_pose):
+            rows, pair = candidate_pairs(hand, c, r, margin)
+            m = margin[:, None] if torch.is_tensor(margin) else margin
+            near = (c[:, i] - c[:, j]).norm(dim=-1) < r[i] + r[j] + m
+            b, p = near.nonzero(as_tuple=True)
+            order = torch.argsort(b * i.numel() + rank[p])
+            assert torch.equal(rows, b[order]) and torch.equal(pair, p[order]), margin
+    finally:
+        t["probe"] = default
+    assert (gap < 0).any()  # some poses self-collide
+    assert default == (name != "shadow")  # LEAP and Allegro probe by default, Shadow does not
