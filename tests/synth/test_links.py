@@ -63,3 +63,26 @@ def test_contact_bounds_fall_from_touching_to_the_activation_distance(hand):
     m = cfg.sphere_margin_m
     gap = torch.tensor([-0.003, -m, -m + 0.005, -m + 0.01, 0.05], dtype=torch.float64)
     assert torch.allclose(contact_bounds(gap, cfg), torch.tensor([1.0, 1.0, 0.5, 0.0, 0.0], dtype=torch.float64))
+
+
+@pytest.mark.parametrize("layout", ["one target", "stacked", "mixed grids"])
+def test_link_choice_is_the_nearest_sphere_by_each_targets_grid(hand, ball, layout):
+    """Each link's chosen sphere and gap are the smallest of its spheres' gaps by each pose's own
+    target (`GraspTarget.approx_query` on that pose alone): one target, two stacked grids, and two
+    grids of different resolutions in an interleaved order (the per-target loop)."""
+    box = GraspTarget.from_mesh(trimesh.creation.box((1.0, 0.6, 0.4)), 0.1, "box",
+                                grid_resolution=24 if layout == "mixed grids" else 32)
+    targets = [ball] if layout == "one target" else [ball, box]
+    index = {"one target": torch.zeros(6, dtype=torch.long), "stacked": torch.tensor([0, 0, 0, 1, 1, 1]),
+             "mixed grids": torch.tensor([1, 0, 0, 1, 0, 1])}[layout]
+    links = torch.tensor([hand.palm_link] + contact_links(hand))
+    init = InitConfig(distance_m=(0.0, 0.02), curl=0.5)
+    root, q = initial_poses(hand, targets, index, init, torch.Generator().manual_seed(1))
+    centres, radii = hand.spheres(root, hand.apply_couplings(q))
+    lc = link_contacts(hand, targets, index, centres, radii, links)
+    member = hand.sphere_link_index[None, :] == links[:, None]  # (L, S)
+    for b in range(len(index)):
+        gap = targets[int(index[b])].approx_query(centres[b].detach())[0] - radii  # (S,)
+        want = torch.where(member, gap[None], torch.inf).min(-1)  # (L,) the least gap, its sphere
+        assert torch.equal(lc.sphere[b], want.indices)
+        assert torch.allclose(lc.gap[b], want.values, rtol=0, atol=1e-12)
