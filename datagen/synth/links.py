@@ -84,20 +84,6 @@ def _distances(targets, object_index: torch.Tensor, points: torch.Tensor) -> tor
     return d
 
 
-def _link_table(hand, links: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """``cand (S',)``: the spheres on any of ``links (L,)``, in index order; ``table (L, W)``: each
-    link's spheres as positions in ``cand``, ascending, padded with ``S'`` (W: the most on one link;
-    LEAP's 13 links: 256 of 1095, so the nearest sphere is an argmin over 13 x 256, not 13 x 1095)."""
-    member = hand.sphere_link_index[None, :] == links[:, None]  # (L, S)
-    cand = member.any(0).nonzero().squeeze(-1)
-    on = member[:, cand]  # (L, S')
-    count = on.sum(1)
-    order = torch.argsort((~on).to(torch.int8), dim=1, stable=True)[:, :int(count.max())]  # its own first, ascending
-    slot = torch.arange(order.shape[1], device=order.device)
-    pad = torch.where(count > 0, cand.shape[0], 0)[:, None]  # a link without spheres: cand[0], as an argmin over none
-    return cand, torch.where(slot[None] < count[:, None], order, pad.expand_as(order))
-
-
 def link_contacts(hand, targets, object_index: torch.Tensor, centres: torch.Tensor, radii: torch.Tensor,
                   links: torch.Tensor) -> LinkContacts:
     """:class:`LinkContacts` of ``links (L,)`` (hand link indices: the palm, phalanges) at their
@@ -107,12 +93,14 @@ def link_contacts(hand, targets, object_index: torch.Tensor, centres: torch.Tens
     from datagen.synth.energies import _query_targets
 
     B = centres.shape[0]
-    cand, table = _link_table(hand, links)
+    member = hand.sphere_link_index[None, :] == links[:, None]  # (L, S)
+    cand = member.any(0).nonzero().squeeze(-1)  # spheres on any of the links
     with torch.no_grad():
         gap = _distances(targets, object_index, centres.detach()[:, cand]) - radii[cand]  # (B, S')
-        gap = torch.cat([gap, gap.new_full((B, 1), torch.finfo(gap.dtype).max)], 1)  # the padding's column
-        pick = gap[:, table].argmin(-1)  # (B, L): the first least gap of each link's spheres, in index order
-        sphere = cand[table[torch.arange(table.shape[0], device=table.device), pick]]
+        big = torch.finfo(gap.dtype).max
+        on = member[:, cand]  # (L, S')
+        pick = torch.where(on[None], gap[:, None, :], torch.full_like(gap[:, None, :], big)).argmin(-1)  # (B, L)
+        sphere = cand[pick]
     rows = torch.arange(B, device=centres.device)[:, None]
     chosen = centres[rows, sphere]  # (B, L, 3), differentiable
     dist, closest, outward = _query_targets(targets, object_index, chosen, exact=False)
